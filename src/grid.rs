@@ -1,0 +1,219 @@
+//! The uniform background grid: geometry, node indexing and the node fields that a step writes.
+//!
+//! The grid covers the domain `[origin, origin + cells * h]` per axis. Around it lie `ghost` layers
+//! of extra nodes, so that every shape function has its full stencil for any particle inside the
+//! domain: partition of unity and linear reproduction then hold up to the grid's faces with no
+//! boundary-modified splines. Wall conditions fold the ghost layers back onto the domain (see
+//! [`crate::boundary`]).
+//!
+//! Node storage is dense, but a step only visits the nodes that particles touched (the
+//! `active` list) and resets only those.
+
+use crate::error::{check_finite, check_positive, Error, Result};
+use crate::Vector;
+
+/// Geometry of the background grid. Nodes have integer indices `-ghost ..= cells + ghost` per axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid<const D: usize> {
+    pub origin: Vector<D>,
+    pub cell_size: f64,
+    pub cells: [usize; D],
+    ghost: usize,
+    /// Nodes per axis including ghost layers.
+    dims: [usize; D],
+    strides: [usize; D],
+}
+
+impl<const D: usize> Grid<D> {
+    /// A grid with `cells[a]` cells of size `cell_size` along axis `a`, starting at `origin`.
+    ///
+    /// Fails when the cell size is not positive, the origin is not finite, or a cell count is zero
+    /// or so large that the node count would overflow.
+    pub fn new(origin: Vector<D>, cells: [usize; D], cell_size: f64) -> Result<Self> {
+        check_positive("cell_size", cell_size)?;
+        for a in 0..D {
+            check_finite("origin", origin[a])?;
+            if cells[a] == 0 {
+                return Err(Error::invalid(format!("cells[{a}] must be at least 1")));
+            }
+            if cells[a] > 1 << 24 {
+                return Err(Error::invalid(format!(
+                    "cells[{a}] = {} is larger than 2^24",
+                    cells[a]
+                )));
+            }
+            let far = origin[a] + cells[a] as f64 * cell_size;
+            check_finite("origin + cells * cell_size", far)?;
+        }
+        let mut g = Grid {
+            origin,
+            cell_size,
+            cells,
+            ghost: 0,
+            dims: [0; D],
+            strides: [0; D],
+        };
+        g.set_ghost_layers(0)?;
+        Ok(g)
+    }
+
+    /// Sets the number of ghost node layers (chosen from the shape function's support).
+    pub fn set_ghost_layers(&mut self, ghost: usize) -> Result<()> {
+        let mut stride = 1usize;
+        let mut dims = [0; D];
+        let mut strides = [0; D];
+        for a in 0..D {
+            dims[a] = self.cells[a] + 1 + 2 * ghost;
+            strides[a] = stride;
+            stride = stride
+                .checked_mul(dims[a])
+                .filter(|&s| s <= 1 << 34)
+                .ok_or_else(|| Error::invalid("grid has too many nodes (more than 2^34)"))?;
+        }
+        self.ghost = ghost;
+        self.dims = dims;
+        self.strides = strides;
+        Ok(())
+    }
+
+    pub fn ghost_layers(&self) -> usize {
+        self.ghost
+    }
+
+    /// Total number of stored nodes, ghost layers included.
+    pub fn node_count(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// Upper corner of the domain.
+    pub fn upper(&self) -> Vector<D> {
+        Vector::<D>::from_fn(|a, _| self.origin[a] + self.cells[a] as f64 * self.cell_size)
+    }
+
+    /// Whether `x` lies inside the closed domain box.
+    pub fn contains(&self, x: &Vector<D>) -> bool {
+        let up = self.upper();
+        (0..D).all(|a| x[a] >= self.origin[a] && x[a] <= up[a])
+    }
+
+    /// Linear storage index of the node with integer index `i` (each in `-ghost ..= cells+ghost`).
+    #[inline]
+    pub fn node_index(&self, i: [i64; D]) -> usize {
+        let mut n = 0usize;
+        for a in 0..D {
+            let s = i[a] + self.ghost as i64;
+            debug_assert!(s >= 0 && (s as usize) < self.dims[a], "node outside grid");
+            n += s as usize * self.strides[a];
+        }
+        n
+    }
+
+    /// Integer node index of storage index `n`.
+    #[inline]
+    pub fn node_multi_index(&self, mut n: usize) -> [i64; D] {
+        let mut i = [0i64; D];
+        for a in (0..D).rev() {
+            i[a] = (n / self.strides[a]) as i64 - self.ghost as i64;
+            n %= self.strides[a];
+        }
+        i
+    }
+
+    /// Position of the node with integer index `i`.
+    #[inline]
+    pub fn node_position(&self, i: [i64; D]) -> Vector<D> {
+        Vector::<D>::from_fn(|a, _| self.origin[a] + i[a] as f64 * self.cell_size)
+    }
+
+    /// Position of `x` in cell units relative to the origin.
+    #[inline]
+    pub fn to_cell_units(&self, x: &Vector<D>) -> Vector<D> {
+        (x - self.origin) / self.cell_size
+    }
+}
+
+/// Node fields written during one step, with the list of nodes that were touched.
+#[derive(Debug, Default, Clone)]
+pub struct GridNodes<const D: usize> {
+    pub mass: Vec<f64>,
+    pub momentum: Vec<Vector<D>>,
+    pub force: Vec<Vector<D>>,
+    /// Velocity at the start of the step (`momentum / mass`), used by FLIP.
+    pub velocity_old: Vec<Vector<D>>,
+    /// Velocity after the grid update and boundary conditions.
+    pub velocity: Vec<Vector<D>>,
+    touched: Vec<bool>,
+    /// Storage indices of the touched nodes, in the order they were first touched.
+    pub active: Vec<usize>,
+}
+
+impl<const D: usize> GridNodes<D> {
+    /// Sizes the storage for `grid` (all zero, nothing active).
+    pub fn resize(&mut self, grid: &Grid<D>) {
+        let n = grid.node_count();
+        self.mass = vec![0.0; n];
+        self.momentum = vec![Vector::zeros(); n];
+        self.force = vec![Vector::zeros(); n];
+        self.velocity_old = vec![Vector::zeros(); n];
+        self.velocity = vec![Vector::zeros(); n];
+        self.touched = vec![false; n];
+        self.active.clear();
+    }
+
+    /// Marks node `n` as written this step.
+    #[inline]
+    pub fn touch(&mut self, n: usize) {
+        if !self.touched[n] {
+            self.touched[n] = true;
+            self.active.push(n);
+        }
+    }
+
+    /// Zeroes the nodes written this step, and only those.
+    pub fn reset(&mut self) {
+        for &n in &self.active {
+            self.mass[n] = 0.0;
+            self.momentum[n] = Vector::zeros();
+            self.force[n] = Vector::zeros();
+            self.velocity_old[n] = Vector::zeros();
+            self.velocity[n] = Vector::zeros();
+            self.touched[n] = false;
+        }
+        self.active.clear();
+    }
+
+    /// Whether every node is zero and inactive (for tests of the reset).
+    pub fn is_clear(&self) -> bool {
+        self.active.is_empty()
+            && self.mass.iter().all(|&m| m == 0.0)
+            && self.momentum.iter().all(|p| p.norm_squared() == 0.0)
+            && self.force.iter().all(|f| f.norm_squared() == 0.0)
+            && !self.touched.iter().any(|&t| t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn node_index_round_trip_with_ghosts() {
+        let mut g = Grid::<3>::new(Vector::<3>::new(-1.0, 0.0, 2.0), [4, 5, 6], 0.5).unwrap();
+        g.set_ghost_layers(2).unwrap();
+        assert_eq!(g.node_count(), 9 * 10 * 11);
+        for n in 0..g.node_count() {
+            assert_eq!(g.node_index(g.node_multi_index(n)), n);
+        }
+        assert_eq!(g.node_index([-2, -2, -2]), 0);
+        assert_eq!(g.node_position([1, 0, -1]), Vector::<3>::new(-0.5, 0.0, 1.5));
+        assert_eq!(g.upper(), Vector::<3>::new(1.0, 2.5, 5.0));
+    }
+
+    #[test]
+    fn rejects_bad_geometry() {
+        assert!(Grid::<2>::new(Vector::<2>::zeros(), [0, 3], 1.0).is_err());
+        assert!(Grid::<2>::new(Vector::<2>::zeros(), [3, 3], 0.0).is_err());
+        assert!(Grid::<2>::new(Vector::<2>::zeros(), [3, 3], f64::NAN).is_err());
+        assert!(Grid::<2>::new(Vector::<2>::new(f64::INFINITY, 0.0), [3, 3], 1.0).is_err());
+    }
+}

@@ -1,0 +1,3 @@
+//! Output files.
+
+pub mod vtk;

@@ -1,0 +1,61 @@
+//! # rkmpm
+//!
+//! An embeddable explicit Material Point Method (MPM) engine: Lagrangian material points on an
+//! Eulerian background grid, in 2D and 3D from one code (`Sim<2>` and `Sim<3>`).
+//!
+//! One step (`Sim::step`) runs the phases of `METHOD.md` section 1:
+//! shape functions → particle to grid → grid update (with boundary conditions) →
+//! grid to particle → constitutive update → grid reset. USL and MUSL are selectable,
+//! with a PIC/FLIP blend or APIC transfer.
+//!
+//! The C API (`include/rkmpm.h`) is a thin layer over this crate in [`ffi`]; all `unsafe` lives there.
+//!
+//! ```
+//! use rkmpm::{Sim, Shape, Material};
+//! let mut sim = Sim::<2>::new([0.0, 0.0], [16, 16], 1.0 / 16.0).unwrap();
+//! sim.set_shape(Shape::BSpline2).unwrap();
+//! let steel = sim.add_material(Material::linear_elastic(7800.0, 200e9, 0.3).unwrap());
+//! sim.add_particles(steel, &[[0.5, 0.5].into()], &[1e-3], None).unwrap();
+//! let dt = sim.stable_dt(0.3).unwrap();
+//! sim.step(dt).unwrap();
+//! assert_eq!(sim.steps(), 1);
+//! ```
+
+pub mod boundary;
+pub mod error;
+pub mod ffi;
+pub mod grid;
+pub mod io;
+pub mod material;
+pub mod particles;
+pub mod shape;
+pub mod sim;
+pub mod step;
+
+pub use boundary::{Boundary, Side};
+pub use error::{Error, ErrorKind, Result};
+pub use grid::Grid;
+pub use material::Material;
+pub use particles::{Field, Particles};
+pub use shape::Shape;
+pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer};
+
+/// A column vector of the simulation's dimension.
+pub type Vector<const D: usize> = nalgebra::SVector<f64, D>;
+/// A square matrix of the simulation's dimension.
+pub type Matrix<const D: usize> = nalgebra::SMatrix<f64, D, D>;
+
+/// Determinant of a `D×D` matrix (closed form for 1, 2 and 3; LU beyond).
+#[inline]
+pub fn determinant<const D: usize>(m: &Matrix<D>) -> f64 {
+    match D {
+        1 => m[(0, 0)],
+        2 => m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)],
+        3 => {
+            m[(0, 0)] * (m[(1, 1)] * m[(2, 2)] - m[(1, 2)] * m[(2, 1)])
+                - m[(0, 1)] * (m[(1, 0)] * m[(2, 2)] - m[(1, 2)] * m[(2, 0)])
+                + m[(0, 2)] * (m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)])
+        }
+        _ => nalgebra::DMatrix::from_column_slice(D, D, m.as_slice()).determinant(),
+    }
+}

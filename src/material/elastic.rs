@@ -1,0 +1,135 @@
+//! Elastic models: small-strain linear elasticity and compressible neo-Hookean.
+
+use super::Constitutive;
+use crate::error::{check_positive, Error, Result};
+use nalgebra::Matrix3;
+
+/// Density and elastic constants, with the Lamé parameters derived once.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ElasticConstants {
+    pub density: f64,
+    pub young: f64,
+    pub poisson: f64,
+    pub lambda: f64,
+    pub mu: f64,
+}
+
+impl ElasticConstants {
+    /// Fails unless density and Young's modulus are positive and `-1 < ν < 0.5`.
+    pub fn new(density: f64, young: f64, poisson: f64) -> Result<Self> {
+        check_positive("density", density)?;
+        check_positive("young", young)?;
+        if !(poisson > -1.0 && poisson < 0.5) {
+            return Err(Error::invalid(format!(
+                "poisson must lie in (-1, 0.5), got {poisson}"
+            )));
+        }
+        let mu = young / (2.0 * (1.0 + poisson));
+        let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+        Ok(ElasticConstants {
+            density,
+            young,
+            poisson,
+            lambda,
+            mu,
+        })
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearElastic(pub ElasticConstants);
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeoHookean(pub ElasticConstants);
+
+impl Constitutive for LinearElastic {
+    fn density(&self) -> f64 {
+        self.0.density
+    }
+    fn wave_speed(&self, _j: f64) -> f64 {
+        ((self.0.lambda + 2.0 * self.0.mu) / self.0.density).sqrt()
+    }
+    fn is_elastic(&self) -> bool {
+        true
+    }
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        let eps = 0.5 * (f + f.transpose()) - Matrix3::identity();
+        Matrix3::identity() * (self.0.lambda * eps.trace()) + eps * (2.0 * self.0.mu)
+    }
+}
+
+impl Constitutive for NeoHookean {
+    fn density(&self) -> f64 {
+        self.0.density
+    }
+    /// From the tangent at `F = J^{1/3} I`: `ρ c² = (λ + 2μ − 2λ ln J) / J` with `ρ = ρ0 / J`.
+    fn wave_speed(&self, j: f64) -> f64 {
+        let c2 = (self.0.lambda + 2.0 * self.0.mu - 2.0 * self.0.lambda * j.ln()) / self.0.density;
+        c2.max(self.0.mu / self.0.density).sqrt()
+    }
+    fn is_elastic(&self) -> bool {
+        true
+    }
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        let j = f.determinant();
+        let b = f * f.transpose();
+        (b - Matrix3::identity()) * (self.0.mu / j)
+            + Matrix3::identity() * (self.0.lambda * j.ln() / j)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::Material;
+    use nalgebra::Rotation3;
+
+    fn small_strain() -> Matrix3<f64> {
+        Matrix3::new(1e-6, 2e-7, 0.0, 2e-7, -3e-7, 1e-7, 0.0, 1e-7, 4e-7)
+    }
+
+    #[test]
+    fn lame_parameters() {
+        let c = ElasticConstants::new(1000.0, 2.6, 0.3).unwrap();
+        assert!((c.mu - 1.0).abs() < 1e-15);
+        assert!((c.lambda - 1.5).abs() < 1e-15);
+        assert!(ElasticConstants::new(1000.0, 1.0, 0.5).is_err());
+        assert!(ElasticConstants::new(0.0, 1.0, 0.3).is_err());
+        assert!(ElasticConstants::new(1.0, -1.0, 0.3).is_err());
+    }
+
+    #[test]
+    fn stress_free_at_identity_and_linear_limit_agrees() {
+        let le = Material::linear_elastic(1000.0, 1e7, 0.3).unwrap();
+        let nh = Material::neo_hookean(1000.0, 1e7, 0.3).unwrap();
+        assert_eq!(le.cauchy_stress(&Matrix3::identity()).norm(), 0.0);
+        assert!(nh.cauchy_stress(&Matrix3::identity()).norm() < 1e-9);
+        let f = Matrix3::identity() + small_strain();
+        let (sl, sn) = (le.cauchy_stress(&f), nh.cauchy_stress(&f));
+        // The models differ at second order in the strain (1e-6): relative 1e-5 is generous.
+        assert!((sl - sn).norm() < 1e-5 * sl.norm(), "{sl} vs {sn}");
+    }
+
+    #[test]
+    fn neo_hookean_is_objective() {
+        let nh = Material::neo_hookean(1000.0, 1e7, 0.3).unwrap();
+        let f = Matrix3::new(1.2, 0.3, 0.0, -0.1, 0.9, 0.2, 0.05, 0.0, 1.1);
+        let r = Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let s = nh.cauchy_stress(&f);
+        let s_rot = nh.cauchy_stress(&(r * f));
+        assert!((s_rot - r * s * r.transpose()).norm() < 1e-9 * s.norm());
+    }
+
+    #[test]
+    fn neo_hookean_uniaxial_strain_matches_closed_form() {
+        // F = diag(s, 1, 1): σ11 = μ (s² − 1)/s + λ ln s / s.
+        let c = ElasticConstants::new(1.0, 3.0, 0.25).unwrap();
+        let nh = NeoHookean(c);
+        let s = 0.8;
+        let f = Matrix3::from_diagonal(&nalgebra::Vector3::new(s, 1.0, 1.0));
+        let sig = nh.cauchy_stress(&f);
+        let exact = c.mu * (s * s - 1.0) / s + c.lambda * s.ln() / s;
+        assert!((sig[(0, 0)] - exact).abs() < 1e-14);
+        assert!((sig[(1, 1)] - c.lambda * s.ln() / s).abs() < 1e-14);
+    }
+}

@@ -1,0 +1,89 @@
+//! Materials: one interface ([`Constitutive`]) and the models behind it.
+//!
+//! Every model works on the 3×3 deformation gradient; a 2D simulation is plane strain
+//! (`F_33 = 1`), so the out-of-plane stress is available for the pressure `p = −tr(σ)/3`.
+//! Elastic models are a pure function of `F` (no history, no return mapping); plasticity and
+//! damage models will carry typed per-particle state.
+
+mod elastic;
+
+pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
+
+use crate::error::Result;
+use nalgebra::Matrix3;
+
+/// What a constitutive model provides to the step.
+pub trait Constitutive {
+    /// Reference mass density.
+    fn density(&self) -> f64;
+    /// Longitudinal (P-) wave speed at volume ratio `j = det F`, for the stable time step.
+    fn wave_speed(&self, j: f64) -> f64;
+    /// Whether the stress is a pure function of `F` (no history, no return mapping).
+    fn is_elastic(&self) -> bool;
+    /// Cauchy stress for the 3×3 deformation gradient `f` (`det f > 0`).
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64>;
+}
+
+/// A material of the simulation.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Material {
+    /// Small-strain linear elasticity, `σ = λ tr(ε) I + 2 μ ε`, `ε = sym(F) − I` (for verification).
+    LinearElastic(LinearElastic),
+    /// Compressible neo-Hookean, `σ = μ/J (F Fᵀ − I) + λ ln J / J I`.
+    NeoHookean(NeoHookean),
+}
+
+impl Material {
+    /// Linear elastic material from density, Young's modulus and Poisson's ratio.
+    pub fn linear_elastic(density: f64, young: f64, poisson: f64) -> Result<Self> {
+        Ok(Material::LinearElastic(LinearElastic(ElasticConstants::new(
+            density, young, poisson,
+        )?)))
+    }
+
+    /// Compressible neo-Hookean material from density, Young's modulus and Poisson's ratio.
+    pub fn neo_hookean(density: f64, young: f64, poisson: f64) -> Result<Self> {
+        Ok(Material::NeoHookean(NeoHookean(ElasticConstants::new(
+            density, young, poisson,
+        )?)))
+    }
+
+    fn model(&self) -> &dyn Constitutive {
+        match self {
+            Material::LinearElastic(m) => m,
+            Material::NeoHookean(m) => m,
+        }
+    }
+}
+
+impl Constitutive for Material {
+    fn density(&self) -> f64 {
+        self.model().density()
+    }
+    fn wave_speed(&self, j: f64) -> f64 {
+        self.model().wave_speed(j)
+    }
+    fn is_elastic(&self) -> bool {
+        self.model().is_elastic()
+    }
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        self.model().cauchy_stress(f)
+    }
+}
+
+/// Embeds a `D×D` deformation gradient in 3×3 (plane strain in 2D).
+pub fn embed3<const D: usize>(f: &crate::Matrix<D>) -> Matrix3<f64> {
+    let mut f3 = Matrix3::identity();
+    f3.view_mut((0, 0), (D, D)).copy_from(f);
+    f3
+}
+
+/// The `D×D` block of a 3×3 tensor.
+pub fn block<const D: usize>(s: &Matrix3<f64>) -> crate::Matrix<D> {
+    s.fixed_view::<D, D>(0, 0).into_owned()
+}
+
+/// Pressure `p = −tr(σ)/3` of a 3×3 Cauchy stress.
+pub fn pressure(s: &Matrix3<f64>) -> f64 {
+    -s.trace() / 3.0
+}

@@ -1,0 +1,154 @@
+//! Tensor-product B-splines on the grid nodes: linear hats, quadratic and cubic B-splines.
+
+use super::ShapeFunction;
+use crate::grid::Grid;
+use crate::Vector;
+
+/// Polynomial order of a grid B-spline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BSplineOrder {
+    Linear,
+    Quadratic,
+    Cubic,
+}
+
+impl BSplineOrder {
+    /// Nodes per axis in the stencil.
+    fn width(self) -> usize {
+        match self {
+            BSplineOrder::Linear => 2,
+            BSplineOrder::Quadratic => 3,
+            BSplineOrder::Cubic => 4,
+        }
+    }
+
+    /// First stencil node (integer index along one axis) for a point at `xi` cell units.
+    #[inline]
+    fn first_node(self, xi: f64) -> i64 {
+        match self {
+            BSplineOrder::Linear => xi.floor() as i64,
+            BSplineOrder::Quadratic => (xi - 0.5).floor() as i64,
+            BSplineOrder::Cubic => xi.floor() as i64 - 1,
+        }
+    }
+
+    /// Kernel value and derivative at signed distance `d` (in cell units) from a node.
+    #[inline]
+    pub fn kernel(self, d: f64) -> (f64, f64) {
+        let r = d.abs();
+        let s = d.signum();
+        match self {
+            BSplineOrder::Linear => {
+                if r < 1.0 {
+                    (1.0 - r, -s)
+                } else {
+                    (0.0, 0.0)
+                }
+            }
+            BSplineOrder::Quadratic => {
+                if r < 0.5 {
+                    (0.75 - r * r, -2.0 * d)
+                } else if r < 1.5 {
+                    let t = 1.5 - r;
+                    (0.5 * t * t, -s * t)
+                } else {
+                    (0.0, 0.0)
+                }
+            }
+            BSplineOrder::Cubic => {
+                if r < 1.0 {
+                    (0.5 * r * r * r - r * r + 2.0 / 3.0, s * (1.5 * r * r - 2.0 * r))
+                } else if r < 2.0 {
+                    let t = 2.0 - r;
+                    (t * t * t / 6.0, -s * 0.5 * t * t)
+                } else {
+                    (0.0, 0.0)
+                }
+            }
+        }
+    }
+}
+
+/// A tensor-product B-spline shape function of the given order.
+#[derive(Debug, Clone, Copy)]
+pub struct BSpline {
+    pub order: BSplineOrder,
+}
+
+impl BSpline {
+    pub fn new(order: BSplineOrder) -> Self {
+        BSpline { order }
+    }
+}
+
+impl<const D: usize> ShapeFunction<D> for BSpline {
+    fn stencil_len(&self) -> usize {
+        self.order.width().pow(D as u32)
+    }
+
+    fn ghost_layers(&self) -> usize {
+        // The stencil of a point on the upper face reaches `width - 1` nodes past it at most.
+        match self.order {
+            BSplineOrder::Linear => 1,
+            BSplineOrder::Quadratic | BSplineOrder::Cubic => 2,
+        }
+    }
+
+    fn apic_inertia(&self, h: f64) -> Option<f64> {
+        match self.order {
+            BSplineOrder::Linear => None,
+            BSplineOrder::Quadratic => Some(h * h / 4.0),
+            BSplineOrder::Cubic => Some(h * h / 3.0),
+        }
+    }
+
+    fn evaluate(
+        &self,
+        grid: &Grid<D>,
+        x: &Vector<D>,
+        nodes: &mut [usize],
+        values: &mut [f64],
+        gradients: &mut [Vector<D>],
+    ) {
+        let width = self.order.width();
+        let xi = grid.to_cell_units(x);
+        let inv_h = 1.0 / grid.cell_size;
+        // 1D values and derivatives per axis (width ≤ 4).
+        let mut first = [0i64; D];
+        let mut w = [[0.0f64; 4]; D];
+        let mut dw = [[0.0f64; 4]; D];
+        for a in 0..D {
+            first[a] = self.order.first_node(xi[a]);
+            for k in 0..width {
+                let (v, dv) = self.order.kernel(xi[a] - (first[a] + k as i64) as f64);
+                w[a][k] = v;
+                dw[a][k] = dv * inv_h;
+            }
+        }
+        // Tensor product over the stencil, axis 0 fastest.
+        let mut k = [0usize; D];
+        for s in 0..nodes.len() {
+            let mut idx = [0i64; D];
+            let mut value = 1.0;
+            for a in 0..D {
+                idx[a] = first[a] + k[a] as i64;
+                value *= w[a][k[a]];
+            }
+            let grad = Vector::<D>::from_fn(|a, _| {
+                (0..D)
+                    .map(|b| if a == b { dw[b][k[b]] } else { w[b][k[b]] })
+                    .product()
+            });
+            nodes[s] = grid.node_index(idx);
+            values[s] = value;
+            gradients[s] = grad;
+            for kk in k.iter_mut() {
+                *kk += 1;
+                if *kk < width {
+                    break;
+                }
+                *kk = 0;
+            }
+        }
+    }
+}

@@ -1,0 +1,102 @@
+//! Shape functions: one interface, a per-particle stencil of any (fixed per shape) size.
+//!
+//! Every shape function fills, for a position `x`, the storage indices of its stencil nodes, the
+//! values `Ψ_I(x)` and the gradients `∇Ψ_I(x)`. The step computes them once per particle per step
+//! into [`Stencils`] and every phase reuses them, so a new shape function (RK) slots in by
+//! implementing [`ShapeFunction`] and nothing in the step changes.
+
+mod bspline;
+
+pub use bspline::{BSpline, BSplineOrder};
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::grid::Grid;
+use crate::Vector;
+use rayon::prelude::*;
+
+/// The shape function a simulation uses, as the user chooses it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Shape {
+    /// Linear hats (standard MPM, C0).
+    Linear,
+    /// Quadratic B-spline (C1).
+    BSpline2,
+    /// Cubic B-spline (C2).
+    BSpline3,
+    /// Reproducing kernel of basis order `order` with normalized support `support` (lands with the RK issue).
+    Rk { order: u32, support: f64 },
+}
+
+impl Shape {
+    /// Builds the shape function for dimension `D`.
+    pub fn build<const D: usize>(&self) -> Result<Box<dyn ShapeFunction<D>>> {
+        match *self {
+            Shape::Linear => Ok(Box::new(BSpline::new(BSplineOrder::Linear))),
+            Shape::BSpline2 => Ok(Box::new(BSpline::new(BSplineOrder::Quadratic))),
+            Shape::BSpline3 => Ok(Box::new(BSpline::new(BSplineOrder::Cubic))),
+            Shape::Rk { .. } => Err(Error::new(
+                ErrorKind::Unsupported,
+                "RK shape functions are not in this build yet (issue 3: reproducing kernel shape functions)",
+            )),
+        }
+    }
+}
+
+/// What every shape function provides.
+pub trait ShapeFunction<const D: usize>: Send + Sync {
+    /// Number of nodes in every particle's stencil (entries may have zero weight).
+    fn stencil_len(&self) -> usize;
+    /// Ghost node layers needed around the domain so that the stencil of any point inside the
+    /// domain lies on the grid.
+    fn ghost_layers(&self) -> usize;
+    /// `D_p = Σ_I Ψ_I (x_I − x_p)(x_I − x_p)ᵀ` when it is the same multiple of the identity for every
+    /// `x_p` (B-splines of order ≥ 2); `None` otherwise (APIC then uses `Σ_I v_I ⊗ ∇Ψ_I`).
+    fn apic_inertia(&self, cell_size: f64) -> Option<f64>;
+    /// Fills `nodes`, `values` and `gradients` (each `stencil_len()` long) for a point `x` inside
+    /// the domain of `grid`.
+    fn evaluate(
+        &self,
+        grid: &Grid<D>,
+        x: &Vector<D>,
+        nodes: &mut [usize],
+        values: &mut [f64],
+        gradients: &mut [Vector<D>],
+    );
+}
+
+/// Shape-function values and gradients of every particle, computed once per step.
+#[derive(Debug, Default, Clone)]
+pub struct Stencils<const D: usize> {
+    pub len: usize,
+    pub nodes: Vec<usize>,
+    pub values: Vec<f64>,
+    pub gradients: Vec<Vector<D>>,
+}
+
+impl<const D: usize> Stencils<D> {
+    /// Evaluates `shape` at every position (in parallel; each particle is independent).
+    pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
+        let len = shape.stencil_len();
+        self.len = len;
+        let total = len * x.len();
+        self.nodes.resize(total, 0);
+        self.values.resize(total, 0.0);
+        self.gradients.resize(total, Vector::zeros());
+        self.nodes
+            .par_chunks_mut(len)
+            .zip(self.values.par_chunks_mut(len))
+            .zip(self.gradients.par_chunks_mut(len))
+            .zip(x.par_iter())
+            .for_each(|(((n, w), g), xp)| shape.evaluate(grid, xp, n, w, g));
+    }
+
+    /// The stencil of particle `p`: node indices, values, gradients.
+    #[inline]
+    pub fn of(&self, p: usize) -> (&[usize], &[f64], &[Vector<D>]) {
+        let r = p * self.len..(p + 1) * self.len;
+        (&self.nodes[r.clone()], &self.values[r.clone()], &self.gradients[r])
+    }
+}
+
+#[cfg(test)]
+mod tests;

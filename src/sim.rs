@@ -1,0 +1,340 @@
+//! The simulation: grid, options, materials, particles, and the safe API that the C layer wraps.
+
+use crate::boundary::{Boundary, Side, Walls};
+use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
+use crate::grid::Grid;
+use crate::material::{Constitutive, Material};
+use crate::particles::{Field, Particles};
+use crate::shape::{Shape, ShapeFunction};
+use crate::step::Workspace;
+use crate::{Matrix, Vector};
+
+/// How the weak form is integrated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Integration {
+    /// Material-point integration (particles are the quadrature points).
+    #[default]
+    MaterialPoint,
+    /// Variationally consistent integration of the given order (lands with the RK/VC issue).
+    Vc { order: u32 },
+}
+
+/// Particle ↔ grid velocity transfer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Transfer {
+    /// `v_p ← (1 − α) v_PIC + α v_FLIP` with `α = flip` in `[0, 1]`.
+    PicFlip { flip: f64 },
+    /// Affine particle-in-cell (Jiang et al. 2015).
+    Apic,
+}
+
+/// Where the stress update and the second velocity map sit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Scheme {
+    /// Update stress last: the velocity gradient uses the grid velocities of the grid update.
+    #[default]
+    Usl,
+    /// Modified USL (Sulsky 1995): particle momenta are mapped to the grid a second time after the
+    /// particle velocity update, and the velocity gradient uses those grid velocities.
+    Musl,
+}
+
+/// A body-force field, evaluated once per step for all particles at once.
+///
+/// `accelerations(time, reference, current, out)` writes the body force per unit mass (an
+/// acceleration, added to gravity) of every particle into `out`; an `Err` stops the step.
+pub trait BodyForce<const D: usize> {
+    fn accelerations(
+        &mut self,
+        time: f64,
+        reference_positions: &[Vector<D>],
+        positions: &[Vector<D>],
+        out: &mut [Vector<D>],
+    ) -> std::result::Result<(), String>;
+}
+
+impl<const D: usize, F> BodyForce<D> for F
+where
+    F: FnMut(f64, &[Vector<D>], &[Vector<D>], &mut [Vector<D>]) -> std::result::Result<(), String>,
+{
+    fn accelerations(
+        &mut self,
+        time: f64,
+        reference_positions: &[Vector<D>],
+        positions: &[Vector<D>],
+        out: &mut [Vector<D>],
+    ) -> std::result::Result<(), String> {
+        self(time, reference_positions, positions, out)
+    }
+}
+
+/// Options of a simulation; the ones marked "before stepping" are fixed by the first step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options<const D: usize> {
+    /// Before stepping. Default: quadratic B-spline.
+    pub shape: Shape,
+    /// Before stepping. Default: material-point integration.
+    pub integration: Integration,
+    /// Before stepping. Default: APIC.
+    pub transfer: Transfer,
+    /// Before stepping. Default: USL.
+    pub scheme: Scheme,
+    pub gravity: Vector<D>,
+    pub walls: Walls<D>,
+}
+
+/// An explicit MPM simulation in `D` dimensions (2 or 3).
+pub struct Sim<const D: usize> {
+    pub(crate) grid: Grid<D>,
+    pub(crate) options: Options<D>,
+    pub(crate) shape: Box<dyn ShapeFunction<D>>,
+    pub(crate) materials: Vec<Material>,
+    pub(crate) particles: Particles<D>,
+    pub(crate) body_force: Option<Box<dyn BodyForce<D>>>,
+    pub(crate) time: f64,
+    pub(crate) steps: u64,
+    pub(crate) work: Workspace<D>,
+}
+
+impl<const D: usize> Sim<D> {
+    /// A simulation on a grid of `cells` cells of size `cell_size` from `origin`, with the default
+    /// options, no materials and no particles.
+    pub fn new(origin: impl Into<Vector<D>>, cells: [usize; D], cell_size: f64) -> Result<Self> {
+        if D != 2 && D != 3 {
+            return Err(Error::invalid(format!("dimension must be 2 or 3, got {D}")));
+        }
+        let mut grid = Grid::new(origin.into(), cells, cell_size)?;
+        let shape_choice = Shape::BSpline2;
+        let shape = shape_choice.build::<D>()?;
+        grid.set_ghost_layers(shape.ghost_layers())?;
+        Ok(Sim {
+            grid,
+            options: Options {
+                shape: shape_choice,
+                integration: Integration::MaterialPoint,
+                transfer: Transfer::Apic,
+                scheme: Scheme::Usl,
+                gravity: Vector::zeros(),
+                walls: Walls::default(),
+            },
+            shape,
+            materials: Vec::new(),
+            particles: Particles::default(),
+            body_force: None,
+            time: 0.0,
+            steps: 0,
+            work: Workspace::default(),
+        })
+    }
+
+    fn before_stepping(&self, what: &str) -> Result<()> {
+        if self.steps > 0 {
+            Err(Error::state(format!(
+                "{what} can only be changed before the first step (this simulation has taken {})",
+                self.steps
+            )))
+        } else {
+            Ok(())
+        }
+    }
+
+    /// Chooses the shape function. Before stepping only.
+    pub fn set_shape(&mut self, shape: Shape) -> Result<()> {
+        self.before_stepping("the shape function")?;
+        let f = shape.build::<D>()?;
+        let mut grid = self.grid.clone();
+        grid.set_ghost_layers(f.ghost_layers())?;
+        self.grid = grid;
+        self.shape = f;
+        self.options.shape = shape;
+        Ok(())
+    }
+
+    /// Chooses the integration. Before stepping only.
+    pub fn set_integration(&mut self, integration: Integration) -> Result<()> {
+        self.before_stepping("the integration")?;
+        match integration {
+            Integration::MaterialPoint => {
+                self.options.integration = integration;
+                Ok(())
+            }
+            Integration::Vc { .. } => Err(Error::new(
+                ErrorKind::Unsupported,
+                "VC integration is not in this build yet (issue 3: variationally consistent integration)",
+            )),
+        }
+    }
+
+    /// Chooses the velocity transfer. Before stepping only.
+    pub fn set_transfer(&mut self, transfer: Transfer) -> Result<()> {
+        self.before_stepping("the transfer")?;
+        if let Transfer::PicFlip { flip } = transfer {
+            if !(0.0..=1.0).contains(&flip) {
+                return Err(Error::invalid(format!(
+                    "flip_ratio must lie in [0, 1], got {flip}"
+                )));
+            }
+        }
+        self.options.transfer = transfer;
+        Ok(())
+    }
+
+    /// Chooses USL or MUSL. Before stepping only.
+    pub fn set_scheme(&mut self, scheme: Scheme) -> Result<()> {
+        self.before_stepping("the scheme")?;
+        self.options.scheme = scheme;
+        Ok(())
+    }
+
+    /// Sets gravity (an acceleration); may change between steps.
+    pub fn set_gravity(&mut self, g: impl Into<Vector<D>>) -> Result<()> {
+        let g = g.into();
+        for a in 0..D {
+            check_finite("gravity", g[a])?;
+        }
+        self.options.gravity = g;
+        Ok(())
+    }
+
+    /// Sets the condition on one face; may change between steps.
+    pub fn set_boundary(&mut self, axis: usize, side: Side, boundary: Boundary) -> Result<()> {
+        if axis >= D {
+            return Err(Error::invalid(format!(
+                "axis must be below the dimension {D}, got {axis}"
+            )));
+        }
+        boundary.validate()?;
+        self.options.walls.faces[axis][side as usize] = boundary;
+        Ok(())
+    }
+
+    /// Sets (or with `None` removes) the body-force field.
+    pub fn set_body_force(&mut self, body_force: Option<Box<dyn BodyForce<D>>>) {
+        self.body_force = body_force;
+    }
+
+    /// Adds a material and returns its id.
+    pub fn add_material(&mut self, material: Material) -> u32 {
+        self.materials.push(material);
+        (self.materials.len() - 1) as u32
+    }
+
+    /// Adds particles of one material. All-or-nothing: on any error no particle is added.
+    ///
+    /// Requires finite positions inside the domain, finite positive volumes, finite velocities
+    /// (`None` means at rest) and an existing material. Mass is `density × volume`.
+    pub fn add_particles(
+        &mut self,
+        material: u32,
+        positions: &[Vector<D>],
+        volumes: &[f64],
+        velocities: Option<&[Vector<D>]>,
+    ) -> Result<()> {
+        let mat = self.materials.get(material as usize).ok_or_else(|| {
+            Error::new(
+                ErrorKind::UnknownMaterial,
+                format!(
+                    "material {material} does not exist ({} added so far)",
+                    self.materials.len()
+                ),
+            )
+        })?;
+        let n = positions.len();
+        if volumes.len() != n || velocities.is_some_and(|v| v.len() != n) {
+            return Err(Error::invalid("positions, volumes and velocities differ in length"));
+        }
+        for (p, x) in positions.iter().enumerate() {
+            if x.iter().any(|c| !c.is_finite()) {
+                return Err(Error::invalid(format!("position of particle {p} is not finite")));
+            }
+            if !self.grid.contains(x) {
+                return Err(Error::new(
+                    ErrorKind::OutsideGrid,
+                    format!(
+                        "particle {p} at {:?} lies outside the grid domain {:?} .. {:?}",
+                        x.as_slice(),
+                        self.grid.origin.as_slice(),
+                        self.grid.upper().as_slice()
+                    ),
+                ));
+            }
+            check_positive(&format!("volume of particle {p}"), volumes[p])?;
+            if let Some(v) = velocities {
+                if v[p].iter().any(|c| !c.is_finite()) {
+                    return Err(Error::invalid(format!("velocity of particle {p} is not finite")));
+                }
+            }
+        }
+        let rho = mat.density();
+        let ps = &mut self.particles;
+        let apic = matches!(self.options.transfer, Transfer::Apic) || !ps.affine.is_empty();
+        ps.position.extend_from_slice(positions);
+        ps.reference_position.extend_from_slice(positions);
+        match velocities {
+            Some(v) => ps.velocity.extend_from_slice(v),
+            None => ps.velocity.extend(std::iter::repeat_n(Vector::zeros(), n)),
+        }
+        ps.deformation_gradient
+            .extend(std::iter::repeat_n(Matrix::<D>::identity(), n));
+        ps.reference_volume.extend_from_slice(volumes);
+        ps.mass.extend(volumes.iter().map(|v| rho * v));
+        ps.stress.extend(std::iter::repeat_n(Matrix::<D>::zeros(), n));
+        ps.pressure.extend(std::iter::repeat_n(0.0, n));
+        ps.material.extend(std::iter::repeat_n(material, n));
+        if apic {
+            ps.affine.resize(ps.position.len(), Matrix::<D>::zeros());
+        }
+        Ok(())
+    }
+
+    /// The largest stable time step times `cfl`: `cfl · h / max_p(c_p + |v_p|)`.
+    ///
+    /// Fails for a `cfl` outside `(0, 1]` and when there are no particles.
+    pub fn stable_dt(&self, cfl: f64) -> Result<f64> {
+        if !(cfl > 0.0 && cfl <= 1.0) {
+            return Err(Error::invalid(format!("cfl must lie in (0, 1], got {cfl}")));
+        }
+        Ok(cfl * self.critical_dt()?)
+    }
+
+    /// `h / max_p(c_p + |v_p|)`, the step above which explicit MPM is unstable.
+    pub(crate) fn critical_dt(&self) -> Result<f64> {
+        if self.particles.is_empty() {
+            return Err(Error::state("no particles: the stable time step is undefined"));
+        }
+        let ps = &self.particles;
+        let speed = (0..ps.len())
+            .map(|p| {
+                let j = crate::determinant(&ps.deformation_gradient[p]);
+                self.materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
+            })
+            .fold(0.0, f64::max);
+        Ok(self.grid.cell_size / speed)
+    }
+
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+    pub fn grid(&self) -> &Grid<D> {
+        &self.grid
+    }
+    pub fn options(&self) -> &Options<D> {
+        &self.options
+    }
+    pub fn particles(&self) -> &Particles<D> {
+        &self.particles
+    }
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
+    /// Values of `field` for every particle, particle-major.
+    pub fn field(&self, field: Field) -> Vec<f64> {
+        let mut out = vec![0.0; field.components(D) * self.particles.len()];
+        self.particles.write_field(field, &mut out);
+        out
+    }
+}

@@ -1,0 +1,129 @@
+//! Grid to particle: velocity (PIC/FLIP blend or APIC), position, velocity gradient and `F`.
+
+use super::TransferPlan;
+use crate::error::ErrorKind;
+use crate::grid::{Grid, GridNodes};
+use crate::particles::Particles;
+use crate::shape::Stencils;
+use crate::{Matrix, Vector};
+use rayon::prelude::*;
+
+/// The new state of one particle, built during a step and committed when the step succeeds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParticleUpdate<const D: usize> {
+    pub position: Vector<D>,
+    pub velocity: Vector<D>,
+    pub affine: Matrix<D>,
+    pub deformation_gradient: Matrix<D>,
+    pub stress: Matrix<D>,
+    pub pressure: f64,
+}
+
+impl<const D: usize> Default for ParticleUpdate<D> {
+    fn default() -> Self {
+        ParticleUpdate {
+            position: Vector::zeros(),
+            velocity: Vector::zeros(),
+            affine: Matrix::zeros(),
+            deformation_gradient: Matrix::identity(),
+            stress: Matrix::zeros(),
+            pressure: 0.0,
+        }
+    }
+}
+
+impl<const D: usize> ParticleUpdate<D> {
+    /// Whether the new state is admissible; if not, the kind of failure and what was wrong.
+    pub fn check(&self, grid: &Grid<D>) -> Result<(), (ErrorKind, String)> {
+        let finite = self.position.iter().all(|c| c.is_finite())
+            && self.velocity.iter().all(|c| c.is_finite())
+            && self.deformation_gradient.iter().all(|c| c.is_finite())
+            && self.stress.iter().all(|c| c.is_finite())
+            && self.affine.iter().all(|c| c.is_finite())
+            && self.pressure.is_finite();
+        if !finite {
+            return Err((ErrorKind::NonFinite, "has a non-finite value".into()));
+        }
+        let j = crate::determinant(&self.deformation_gradient);
+        if j <= 0.0 {
+            return Err((
+                ErrorKind::InvertedParticle,
+                format!("is inverted (det F = {j:e})"),
+            ));
+        }
+        if !grid.contains(&self.position) {
+            return Err((
+                ErrorKind::OutsideGrid,
+                format!("would leave the grid (x = {:?})", self.position.as_slice()),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `L_p = Σ_I v_I ⊗ ∇Ψ_I(x_p)` with the current node velocities.
+#[inline]
+pub fn velocity_gradient<const D: usize>(
+    stencils: &Stencils<D>,
+    nodes: &GridNodes<D>,
+    p: usize,
+) -> Matrix<D> {
+    let (ns, _, gs) = stencils.of(p);
+    let mut l = Matrix::<D>::zeros();
+    for s in 0..ns.len() {
+        l += nodes.velocity[ns[s]] * gs[s].transpose();
+    }
+    l
+}
+
+/// Gathers the new velocity, affine matrix and position of every particle, and under USL its new
+/// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map).
+#[allow(clippy::too_many_arguments)]
+pub fn grid_to_particle<const D: usize>(
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+    stencils: &Stencils<D>,
+    nodes: &GridNodes<D>,
+    plan: TransferPlan,
+    dt: f64,
+    update_deformation: bool,
+    updates: &mut Vec<ParticleUpdate<D>>,
+) {
+    updates.resize(ps.len(), ParticleUpdate::default());
+    let flip = plan.flip > 0.0;
+    updates.par_iter_mut().enumerate().for_each(|(p, u)| {
+        let (ns, ws, gs) = stencils.of(p);
+        let xp = ps.position[p];
+        let mut v_pic = Vector::<D>::zeros();
+        let mut dv = Vector::<D>::zeros();
+        let mut b = Matrix::<D>::zeros();
+        let mut l = Matrix::<D>::zeros();
+        for s in 0..ns.len() {
+            let (n, w) = (ns[s], ws[s]);
+            let vi = nodes.velocity[n];
+            v_pic += w * vi;
+            if flip {
+                dv += w * (vi - nodes.velocity_old[n]);
+            }
+            if plan.inverse_inertia.is_some() {
+                b += (w * vi) * (grid.node_position(grid.node_multi_index(n)) - xp).transpose();
+            }
+            l += vi * gs[s].transpose();
+        }
+        u.position = xp + dt * v_pic;
+        u.velocity = if flip {
+            (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
+        } else {
+            v_pic
+        };
+        if plan.apic {
+            u.affine = match plan.inverse_inertia {
+                Some(inv) => b * inv,
+                None => l,
+            };
+        }
+        if update_deformation {
+            u.deformation_gradient = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+        }
+    });
+}

@@ -1,0 +1,232 @@
+//! One explicit MPM step (METHOD.md section 1), phase by phase:
+//!
+//! 1. shape functions of every particle ([`crate::shape::Stencils::compute`]), once per step;
+//! 2. body forces (the callback, once per step with whole arrays);
+//! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force;
+//! 4. [`grid_update`]: velocities, wall conditions;
+//! 5. [`grid_to_particle`]: velocity (PIC/FLIP or APIC), position, velocity gradient, `F`;
+//!    under MUSL the new particle momenta are mapped to the grid again first;
+//! 6. constitutive update, then the checks; the grid is reset where it was written.
+//!
+//! The new particle state is built in a workspace and committed only when every particle passed
+//! the checks (finite, `det F > 0`, inside the grid), so a failed step leaves the last good state.
+
+mod grid_to_particle;
+mod grid_update;
+mod particle_to_grid;
+
+pub use grid_to_particle::{grid_to_particle, velocity_gradient, ParticleUpdate};
+pub use grid_update::grid_update;
+pub use particle_to_grid::particle_to_grid;
+
+use crate::error::{check_positive, Error, ErrorKind, Result};
+use crate::grid::GridNodes;
+use crate::material::{block, embed3, pressure, Constitutive};
+use crate::shape::Stencils;
+use crate::sim::{Scheme, Sim, Transfer};
+use crate::{Matrix, Vector};
+use rayon::prelude::*;
+
+/// Scratch space of a step, kept between steps so the hot loops do not allocate.
+#[derive(Debug, Default)]
+pub struct Workspace<const D: usize> {
+    pub stencils: Stencils<D>,
+    pub nodes: GridNodes<D>,
+    pub body_acceleration: Vec<Vector<D>>,
+    pub updates: Vec<ParticleUpdate<D>>,
+}
+
+/// What the transfer needs from the particles and the shape function.
+#[derive(Debug, Clone, Copy)]
+pub struct TransferPlan {
+    /// FLIP weight (0 for pure PIC and for APIC).
+    pub flip: f64,
+    /// APIC is on.
+    pub apic: bool,
+    /// `1 / D_p` when the shape function's APIC inertia is a constant multiple of the identity.
+    pub inverse_inertia: Option<f64>,
+}
+
+impl<const D: usize> Sim<D> {
+    /// Advances the simulation by `dt`.
+    ///
+    /// Fails, leaving the simulation exactly as it was, when `dt` is not finite and positive, when
+    /// `dt` exceeds the critical step `h / max(c + |v|)` (`UnstableTimeStep`), when the body force
+    /// fails, or when the new state has a non-finite value (`NonFinite`), an inverted particle
+    /// (`InvertedParticle`) or a particle outside the domain (`OutsideGrid`); the message names
+    /// the first such particle and the step.
+    pub fn step(&mut self, dt: f64) -> Result<()> {
+        check_positive("dt", dt)?;
+        if self.particles.is_empty() {
+            self.time += dt;
+            self.steps += 1;
+            return Ok(());
+        }
+        let critical = self.critical_dt()?;
+        if dt > critical {
+            return Err(Error::new(
+                ErrorKind::UnstableTimeStep,
+                format!(
+                    "dt = {dt:e} exceeds the critical time step h / max(c + |v|) = {critical:e} \
+                     (CFL {:.2}); use rkmpm_sim_stable_dt",
+                    dt / critical
+                ),
+            ));
+        }
+        self.options.walls.check_fits(&self.grid)?;
+        let result = self.advance(dt);
+        self.work.nodes.reset();
+        let updates = result?;
+        self.commit(updates);
+        self.time += dt;
+        self.steps += 1;
+        Ok(())
+    }
+
+    fn transfer_plan(&self) -> TransferPlan {
+        match self.options.transfer {
+            Transfer::PicFlip { flip } => TransferPlan {
+                flip,
+                apic: false,
+                inverse_inertia: None,
+            },
+            Transfer::Apic => TransferPlan {
+                flip: 0.0,
+                apic: true,
+                inverse_inertia: self.shape.apic_inertia(self.grid.cell_size).map(|d| 1.0 / d),
+            },
+        }
+    }
+
+    /// Runs the phases and returns the checked new particle state (in the workspace).
+    fn advance(&mut self, dt: f64) -> Result<Vec<ParticleUpdate<D>>> {
+        let plan = self.transfer_plan();
+        let grid = &self.grid;
+        let ps = &self.particles;
+        let work = &mut self.work;
+        if work.nodes.mass.len() != grid.node_count() {
+            work.nodes.resize(grid);
+        }
+
+        // 1. Shape functions, once per particle.
+        work.stencils.compute(self.shape.as_ref(), grid, &ps.position);
+
+        // 2. Body forces.
+        let body = match self.body_force.as_mut() {
+            Some(bf) => {
+                work.body_acceleration.clear();
+                work.body_acceleration.resize(ps.len(), Vector::zeros());
+                bf.accelerations(
+                    self.time,
+                    &ps.reference_position,
+                    &ps.position,
+                    &mut work.body_acceleration,
+                )
+                .map_err(|m| Error::new(ErrorKind::Callback, format!("body force failed: {m}")))?;
+                if let Some(p) = work
+                    .body_acceleration
+                    .iter()
+                    .position(|a| a.iter().any(|c| !c.is_finite()))
+                {
+                    return Err(Error::new(
+                        ErrorKind::Callback,
+                        format!("body force returned a non-finite value for particle {p}"),
+                    ));
+                }
+                Some(work.body_acceleration.as_slice())
+            }
+            None => None,
+        };
+
+        // 3. Particle to grid.
+        let velocity = |p: usize| ps.velocity[p];
+        let affine = |p: usize| ps.affine[p];
+        particle_to_grid(
+            grid,
+            ps,
+            &work.stencils,
+            &velocity,
+            plan.apic.then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+            Some((self.options.gravity, body)),
+            &mut work.nodes,
+        );
+
+        // 4. Grid update with the wall conditions.
+        let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
+        grid_update(grid, &self.options.walls, &mut work.nodes, Some(dt), mass_floor);
+
+        // 5. Grid to particle.
+        let mut updates = std::mem::take(&mut work.updates);
+        let usl = self.options.scheme == Scheme::Usl;
+        grid_to_particle(grid, ps, &work.stencils, &work.nodes, plan, dt, usl, &mut updates);
+        if !usl {
+            // MUSL: map the new particle momenta to the grid again; the velocity gradient uses
+            // those grid velocities.
+            for &n in &work.nodes.active {
+                work.nodes.momentum[n] = Vector::zeros();
+            }
+            let velocity = |p: usize| updates[p].velocity;
+            let affine = |p: usize| updates[p].affine;
+            particle_to_grid(
+                grid,
+                ps,
+                &work.stencils,
+                &velocity,
+                plan.apic.then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+                None,
+                &mut work.nodes,
+            );
+            grid_update(grid, &self.options.walls, &mut work.nodes, None, mass_floor);
+            let nodes = &work.nodes;
+            let stencils = &work.stencils;
+            updates.par_iter_mut().enumerate().for_each(|(p, u)| {
+                let l = velocity_gradient(stencils, nodes, p);
+                u.deformation_gradient = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+            });
+        }
+
+        // 6. Constitutive update.
+        let materials = &self.materials;
+        updates.par_iter_mut().enumerate().for_each(|(p, u)| {
+            if crate::determinant(&u.deformation_gradient) > 0.0 {
+                let s3 = materials[ps.material[p] as usize].cauchy_stress(&embed3(&u.deformation_gradient));
+                u.stress = block(&s3);
+                u.pressure = pressure(&s3);
+            }
+        });
+
+        // Checks: the first bad particle (lowest index) is reported.
+        let bad = updates.par_iter().enumerate().find_first(|(_, u)| u.check(grid).is_err());
+        if let Some((p, u)) = bad {
+            let (kind, what) = u.check(grid).unwrap_err();
+            let message = format!(
+                "step {} (t = {:e}, dt = {dt:e}) rejected: particle {p} {what}; the simulation keeps its last good state",
+                self.steps + 1,
+                self.time
+            );
+            work.updates = updates;
+            return Err(Error::new(kind, message));
+        }
+        Ok(updates)
+    }
+
+    /// Swaps the checked new state into the particles.
+    fn commit(&mut self, updates: Vec<ParticleUpdate<D>>) {
+        let ps = &mut self.particles;
+        let apic = matches!(self.options.transfer, Transfer::Apic);
+        for (p, u) in updates.iter().enumerate() {
+            ps.position[p] = u.position;
+            ps.velocity[p] = u.velocity;
+            ps.deformation_gradient[p] = u.deformation_gradient;
+            ps.stress[p] = u.stress;
+            ps.pressure[p] = u.pressure;
+            if apic {
+                ps.affine[p] = u.affine;
+            }
+        }
+        self.work.updates = updates;
+    }
+}
+
+#[cfg(test)]
+mod tests;

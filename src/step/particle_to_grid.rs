@@ -1,0 +1,56 @@
+//! Particle to grid: `m_I = Σ m_p Ψ_Ip`, `(mv)_I = Σ m_p Ψ_Ip (v_p + C_p (x_I − x_p))`,
+//! `f_I = −Σ V_p σ_p ∇Ψ_Ip + Σ m_p Ψ_Ip b_p`.
+
+use crate::grid::{Grid, GridNodes};
+use crate::particles::Particles;
+use crate::shape::Stencils;
+use crate::{Matrix, Vector};
+
+/// Scatters particle quantities to the nodes of their stencils and marks those nodes active.
+///
+/// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
+///   particle's own, or the updated ones in the second map of MUSL).
+/// * `forces`: `Some((gravity, body))` also accumulates mass and force (`body` the per-particle
+///   body accelerations, if any); `None` maps momentum only.
+///
+/// Serial in particle order, so the sums do not depend on the thread count.
+pub fn particle_to_grid<const D: usize>(
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+    stencils: &Stencils<D>,
+    velocity: &(dyn Fn(usize) -> Vector<D> + Sync),
+    affine: Option<&(dyn Fn(usize) -> Matrix<D> + Sync)>,
+    forces: Option<(Vector<D>, Option<&[Vector<D>]>)>,
+    nodes: &mut GridNodes<D>,
+) {
+    for p in 0..ps.len() {
+        let (ns, ws, gs) = stencils.of(p);
+        let m = ps.mass[p];
+        let v = velocity(p);
+        let c = affine.map(|a| a(p));
+        let xp = ps.position[p];
+        let force = forces.map(|(g, body)| {
+            let b = match body {
+                Some(b) => g + b[p],
+                None => g,
+            };
+            (-ps.volume(p) * ps.stress[p], b)
+        });
+        for s in 0..ns.len() {
+            let (n, w) = (ns[s], ws[s]);
+            if w == 0.0 && gs[s] == Vector::<D>::zeros() {
+                continue;
+            }
+            nodes.touch(n);
+            let mut mv = v;
+            if let Some(c) = c {
+                mv += c * (grid.node_position(grid.node_multi_index(n)) - xp);
+            }
+            nodes.momentum[n] += (m * w) * mv;
+            if let Some((vs, b)) = force {
+                nodes.mass[n] += m * w;
+                nodes.force[n] += vs * gs[s] + (m * w) * b;
+            }
+        }
+    }
+}
