@@ -1,1 +1,733 @@
-//! The C API.
+//! The C API: opaque handles, status codes, a thread-local last-error message, caller-owned
+//! arrays. Every exported function runs through [`gate::gate`]: it checks its pointers, lengths and
+//! values, never lets a panic cross the boundary, and leaves the simulation unchanged on failure.
+//! No physics lives here.
+//!
+//! Vectors are stored dimension-fastest (`x[p * dim + d]`), which is `x(dim, n)` in Fortran.
+//! Thread safety: a simulation may be used by one thread at a time; different simulations may be
+//! used from different threads at once. The last-error message is per thread.
+
+#![allow(non_camel_case_types)]
+#![allow(clippy::missing_safety_doc)] // every function below has a `# Safety` section
+
+pub mod gate;
+pub mod status;
+
+use crate::boundary::{Boundary, Side};
+use crate::io::vtk::{self, VtkSeries};
+use crate::material::Material;
+use crate::particles::Field;
+use crate::shape::Shape;
+use crate::sim::{BodyForce, Integration, Scheme, Sim, Transfer};
+use crate::Vector;
+use gate::{check_ptr, checked_len, gate, slice, unknown_enum, Failure};
+use std::ffi::{c_char, c_void, CStr};
+pub use status::RkmpmStatus;
+use RkmpmStatus::*;
+
+/// Version of the binary interface; changes whenever a signature, a struct or an enum value changes.
+pub const RKMPM_ABI_VERSION: u32 = 1;
+
+/// Shape function (`rkmpm_sim_set_shape`).
+pub type RkmpmShape = u32;
+/// Linear hats (standard MPM).
+pub const RKMPM_SHAPE_LINEAR: RkmpmShape = 0;
+/// Quadratic B-spline (the default).
+pub const RKMPM_SHAPE_BSPLINE2: RkmpmShape = 1;
+/// Cubic B-spline.
+pub const RKMPM_SHAPE_BSPLINE3: RkmpmShape = 2;
+/// Reproducing kernel of order `rk_order`, normalized support `rk_support` (not yet in this version).
+pub const RKMPM_SHAPE_RK: RkmpmShape = 3;
+
+/// Integration of the weak form (`rkmpm_sim_set_integration`).
+pub type RkmpmIntegration = u32;
+/// Material-point integration (the default).
+pub const RKMPM_INTEGRATION_MP: RkmpmIntegration = 0;
+/// Variationally consistent integration of order `vc_order` (not yet in this version).
+pub const RKMPM_INTEGRATION_VC: RkmpmIntegration = 1;
+
+/// Particle-grid velocity transfer (`rkmpm_sim_set_transfer`).
+pub type RkmpmTransfer = u32;
+/// PIC/FLIP blend with FLIP weight `flip_ratio` in [0, 1].
+pub const RKMPM_TRANSFER_PIC_FLIP: RkmpmTransfer = 0;
+/// Affine particle-in-cell (the default).
+pub const RKMPM_TRANSFER_APIC: RkmpmTransfer = 1;
+
+/// Update scheme (`rkmpm_sim_set_scheme`).
+pub type RkmpmScheme = u32;
+/// Update stress last (the default).
+pub const RKMPM_SCHEME_USL: RkmpmScheme = 0;
+/// Modified USL: a second momentum map before the velocity gradient.
+pub const RKMPM_SCHEME_MUSL: RkmpmScheme = 1;
+
+/// Condition on a grid face (`rkmpm_sim_set_boundary`).
+pub type RkmpmBoundary = u32;
+/// No condition (the default).
+pub const RKMPM_BOUNDARY_FREE: RkmpmBoundary = 0;
+/// No velocity on the face (mirror treatment).
+pub const RKMPM_BOUNDARY_FIXED: RkmpmBoundary = 1;
+/// No normal velocity on the face (mirror treatment).
+pub const RKMPM_BOUNDARY_SLIP: RkmpmBoundary = 2;
+/// Unilateral contact with Coulomb friction `friction`.
+pub const RKMPM_BOUNDARY_FRICTION: RkmpmBoundary = 3;
+
+/// Particle quantity (`rkmpm_sim_get_particles`); the comment gives the values per particle.
+pub type RkmpmField = u32;
+/// dim values: current position.
+pub const RKMPM_FIELD_POSITION: RkmpmField = 0;
+/// dim values: velocity.
+pub const RKMPM_FIELD_VELOCITY: RkmpmField = 1;
+/// dim values: position minus reference position.
+pub const RKMPM_FIELD_DISPLACEMENT: RkmpmField = 2;
+/// dim*dim values: Cauchy stress, row-major.
+pub const RKMPM_FIELD_STRESS: RkmpmField = 3;
+/// 1 value: pressure -tr(sigma)/3 (plane strain in 2D).
+pub const RKMPM_FIELD_PRESSURE: RkmpmField = 4;
+/// 1 value: current volume det(F) V0.
+pub const RKMPM_FIELD_VOLUME: RkmpmField = 5;
+/// 1 value: mass.
+pub const RKMPM_FIELD_MASS: RkmpmField = 6;
+/// dim values: position at insertion.
+pub const RKMPM_FIELD_REFERENCE_POSITION: RkmpmField = 7;
+/// dim*dim values: deformation gradient, row-major.
+pub const RKMPM_FIELD_DEFORMATION_GRADIENT: RkmpmField = 8;
+
+/// Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
+/// the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
+/// of every particle into `accelerations` and return 0; any other return value makes the step
+/// fail with `RKMPM_ERR_CALLBACK` and leaves the simulation unchanged.
+pub type RkmpmBodyForceFn = Option<
+    unsafe extern "C" fn(
+        user_data: *mut c_void,
+        time: f64,
+        count: usize,
+        dim: u32,
+        reference_positions: *const f64,
+        positions: *const f64,
+        accelerations: *mut f64,
+    ) -> i32,
+>;
+
+enum AnySim {
+    D2(Sim<2>),
+    D3(Sim<3>),
+}
+
+/// A simulation. Created by `rkmpm_sim_new`, owned by the caller, released by `rkmpm_sim_free`.
+/// One thread at a time may use a simulation; different simulations are independent.
+pub struct RkmpmSim {
+    sim: AnySim,
+    series: Vec<VtkSeries>,
+}
+
+macro_rules! with_sim {
+    ($handle:expr, $s:ident => $body:expr) => {
+        match $handle {
+            AnySim::D2($s) => $body,
+            AnySim::D3($s) => $body,
+        }
+    };
+}
+
+/// # Safety
+/// `sim` must be NULL or a live handle from `rkmpm_sim_new`.
+unsafe fn sim_ref<'a>(sim: *const RkmpmSim) -> Result<&'a RkmpmSim, Failure> {
+    check_ptr("sim", sim)?;
+    Ok(&*sim)
+}
+
+/// # Safety
+/// `sim` must be NULL or a live handle from `rkmpm_sim_new`, not used by another thread.
+unsafe fn sim_mut<'a>(sim: *mut RkmpmSim) -> Result<&'a mut RkmpmSim, Failure> {
+    check_ptr("sim", sim)?;
+    Ok(&mut *sim)
+}
+
+/// # Safety
+/// `out` must be NULL or valid for one write of `T`.
+unsafe fn write_out<T>(name: &str, out: *mut T, value: T) -> Result<(), Failure> {
+    check_ptr(name, out)?;
+    out.write(value);
+    Ok(())
+}
+
+fn vectors<const D: usize>(values: &[f64]) -> Vec<Vector<D>> {
+    values.chunks_exact(D).map(Vector::<D>::from_column_slice).collect()
+}
+
+unsafe fn c_path<'a>(name: &str, path: *const c_char) -> Result<&'a str, Failure> {
+    check_ptr(name, path)?;
+    CStr::from_ptr(path).to_str().map_err(|_| {
+        Failure::new(
+            RKMPM_ERR_INVALID_ARGUMENT,
+            format!("{name} is not valid UTF-8"),
+        )
+    })
+}
+
+/// The library version, e.g. `"0.1.0"` (a static string; do not free).
+#[no_mangle]
+pub extern "C" fn rkmpm_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
+}
+
+/// The binary interface version of the library; compare it with `RKMPM_ABI_VERSION` from the
+/// header you compiled against.
+#[no_mangle]
+pub extern "C" fn rkmpm_abi_version() -> u32 {
+    RKMPM_ABI_VERSION
+}
+
+/// A static description of a status code (`"unknown status"` for a number that is none).
+#[no_mangle]
+pub extern "C" fn rkmpm_status_str(status: i32) -> *const c_char {
+    RkmpmStatus::ALL
+        .iter()
+        .find(|s| **s as i32 == status)
+        .map_or("unknown status\0", |s| s.describe())
+        .as_ptr()
+        .cast()
+}
+
+/// Copies the message of the last failed call on this thread into `buf` (at most `len - 1`
+/// bytes and a NUL) and returns the message's full length in bytes, without the NUL. `buf` may be
+/// NULL when `len` is 0, to ask for the length.
+///
+/// # Safety
+/// `buf` must be valid for `len` bytes of writes when `len > 0`.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_last_error_message(buf: *mut c_char, len: usize) -> usize {
+    let message = gate::last_error();
+    if len > 0 && !buf.is_null() {
+        let n = message.len().min(len - 1);
+        std::ptr::copy_nonoverlapping(message.as_ptr(), buf.cast::<u8>(), n);
+        *buf.add(n) = 0;
+    }
+    message.len()
+}
+
+/// Creates a simulation on a uniform grid: `dim` (2 or 3), `origin` (`dim` values), `cells`
+/// (`dim` cell counts), `cell_size` > 0. Writes the new handle to `*out` (NULL on failure).
+/// Defaults: quadratic B-spline, material-point integration, APIC, USL, no gravity, free faces.
+///
+/// # Safety
+/// `origin` and `cells` must point to `dim` values; `out` must be valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_new(
+    dim: u32,
+    origin: *const f64,
+    cells: *const usize,
+    cell_size: f64,
+    out: *mut *mut RkmpmSim,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_new", || {
+        check_ptr("out", out)?;
+        out.write(std::ptr::null_mut());
+        if dim != 2 && dim != 3 {
+            return Err(Failure::new(
+                RKMPM_ERR_INVALID_ARGUMENT,
+                format!("dim must be 2 or 3, got {dim}"),
+            ));
+        }
+        let d = dim as usize;
+        let origin = slice("origin", origin, d)?;
+        let cells = slice("cells", cells, d)?;
+        let sim = if d == 2 {
+            AnySim::D2(Sim::new(
+                Vector::<2>::from_column_slice(origin),
+                [cells[0], cells[1]],
+                cell_size,
+            )?)
+        } else {
+            AnySim::D3(Sim::new(
+                Vector::<3>::from_column_slice(origin),
+                [cells[0], cells[1], cells[2]],
+                cell_size,
+            )?)
+        };
+        out.write(Box::into_raw(Box::new(RkmpmSim {
+            sim,
+            series: Vec::new(),
+        })));
+        Ok(())
+    })
+}
+
+/// Releases a simulation. NULL is a no-op. The handle must not be used afterwards.
+///
+/// # Safety
+/// `sim` must be NULL or a live handle from `rkmpm_sim_new`, freed once.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_free(sim: *mut RkmpmSim) {
+    if !sim.is_null() {
+        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| drop(Box::from_raw(sim))));
+    }
+}
+
+/// Writes the dimension (2 or 3) to `*out_dim`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_dim` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_dim(sim: *const RkmpmSim, out_dim: *mut u32) -> RkmpmStatus {
+    gate("rkmpm_sim_dim", || {
+        let s = sim_ref(sim)?;
+        let d = match s.sim {
+            AnySim::D2(_) => 2,
+            AnySim::D3(_) => 3,
+        };
+        write_out("out_dim", out_dim, d)
+    })
+}
+
+/// Chooses the shape function (before the first step). `rk_order` and `rk_support` are read
+/// only for `RKMPM_SHAPE_RK`.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_shape(
+    sim: *mut RkmpmSim,
+    shape: RkmpmShape,
+    rk_order: u32,
+    rk_support: f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_shape", || {
+        let s = sim_mut(sim)?;
+        let shape = match shape {
+            RKMPM_SHAPE_LINEAR => Shape::Linear,
+            RKMPM_SHAPE_BSPLINE2 => Shape::BSpline2,
+            RKMPM_SHAPE_BSPLINE3 => Shape::BSpline3,
+            RKMPM_SHAPE_RK => Shape::Rk {
+                order: rk_order,
+                support: rk_support,
+            },
+            other => return Err(unknown_enum("shape", other)),
+        };
+        with_sim!(&mut s.sim, m => m.set_shape(shape))?;
+        Ok(())
+    })
+}
+
+/// Chooses the integration (before the first step).
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_integration(
+    sim: *mut RkmpmSim,
+    integration: RkmpmIntegration,
+    vc_order: u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_integration", || {
+        let s = sim_mut(sim)?;
+        let integration = match integration {
+            RKMPM_INTEGRATION_MP => Integration::MaterialPoint,
+            RKMPM_INTEGRATION_VC => Integration::Vc { order: vc_order },
+            other => return Err(unknown_enum("integration", other)),
+        };
+        with_sim!(&mut s.sim, m => m.set_integration(integration))?;
+        Ok(())
+    })
+}
+
+/// Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] is read only
+/// for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC).
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_transfer(
+    sim: *mut RkmpmSim,
+    transfer: RkmpmTransfer,
+    flip_ratio: f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_transfer", || {
+        let s = sim_mut(sim)?;
+        let transfer = match transfer {
+            RKMPM_TRANSFER_PIC_FLIP => Transfer::PicFlip { flip: flip_ratio },
+            RKMPM_TRANSFER_APIC => Transfer::Apic,
+            other => return Err(unknown_enum("transfer", other)),
+        };
+        with_sim!(&mut s.sim, m => m.set_transfer(transfer))?;
+        Ok(())
+    })
+}
+
+/// Chooses USL or MUSL (before the first step).
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_scheme(sim: *mut RkmpmSim, scheme: RkmpmScheme) -> RkmpmStatus {
+    gate("rkmpm_sim_set_scheme", || {
+        let s = sim_mut(sim)?;
+        let scheme = match scheme {
+            RKMPM_SCHEME_USL => Scheme::Usl,
+            RKMPM_SCHEME_MUSL => Scheme::Musl,
+            other => return Err(unknown_enum("scheme", other)),
+        };
+        with_sim!(&mut s.sim, m => m.set_scheme(scheme))?;
+        Ok(())
+    })
+}
+
+/// Sets gravity, `dim` finite values (may change between steps).
+///
+/// # Safety
+/// `sim` must be a live handle; `g` must point to `dim` values.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_gravity(sim: *mut RkmpmSim, g: *const f64) -> RkmpmStatus {
+    gate("rkmpm_sim_set_gravity", || {
+        let s = sim_mut(sim)?;
+        with_sim!(&mut s.sim, m => {
+            let g = slice("g", g, m.grid().cells.len())?;
+            m.set_gravity(Vector::from_column_slice(g))?;
+        });
+        Ok(())
+    })
+}
+
+/// Sets the condition on the face `side` (-1 low, +1 high) of `axis` (0 .. dim-1);
+/// `friction` (>= 0) is read only for `RKMPM_BOUNDARY_FRICTION`. May change between steps.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_boundary(
+    sim: *mut RkmpmSim,
+    axis: u32,
+    side: i32,
+    kind: RkmpmBoundary,
+    friction: f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_boundary", || {
+        let s = sim_mut(sim)?;
+        let side = Side::from_sign(side)?;
+        let boundary = match kind {
+            RKMPM_BOUNDARY_FREE => Boundary::Free,
+            RKMPM_BOUNDARY_FIXED => Boundary::Fixed,
+            RKMPM_BOUNDARY_SLIP => Boundary::Slip,
+            RKMPM_BOUNDARY_FRICTION => Boundary::Friction(friction),
+            other => return Err(unknown_enum("boundary", other)),
+        };
+        with_sim!(&mut s.sim, m => m.set_boundary(axis as usize, side, boundary))?;
+        Ok(())
+    })
+}
+
+/// A C body-force callback with its user data.
+struct CBodyForce {
+    f: unsafe extern "C" fn(*mut c_void, f64, usize, u32, *const f64, *const f64, *mut f64) -> i32,
+    user: *mut c_void,
+    buffers: [Vec<f64>; 3],
+}
+
+impl<const D: usize> BodyForce<D> for CBodyForce {
+    fn accelerations(
+        &mut self,
+        time: f64,
+        reference: &[Vector<D>],
+        current: &[Vector<D>],
+        out: &mut [Vector<D>],
+    ) -> Result<(), String> {
+        let [x0, x, a] = &mut self.buffers;
+        x0.clear();
+        x0.extend(reference.iter().flat_map(|v| v.iter().copied()));
+        x.clear();
+        x.extend(current.iter().flat_map(|v| v.iter().copied()));
+        a.clear();
+        a.resize(x.len(), 0.0);
+        // SAFETY: the caller promised `f` is callable with arrays of `count * dim` values.
+        let rc = unsafe {
+            (self.f)(self.user, time, out.len(), D as u32, x0.as_ptr(), x.as_ptr(), a.as_mut_ptr())
+        };
+        if rc != 0 {
+            return Err(format!("the callback returned {rc}"));
+        }
+        for (o, v) in out.iter_mut().zip(a.chunks_exact(D)) {
+            *o = Vector::<D>::from_column_slice(v);
+        }
+        Ok(())
+    }
+}
+
+/// Sets the body-force callback and its `user_data` (passed back unchanged); a NULL `f` removes
+/// it. See `RkmpmBodyForceFn` for when and how it is called.
+///
+/// # Safety
+/// `sim` must be a live handle; `f` must stay callable and `user_data` valid while set.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_body_force(
+    sim: *mut RkmpmSim,
+    f: RkmpmBodyForceFn,
+    user_data: *mut c_void,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_body_force", || {
+        let s = sim_mut(sim)?;
+        with_sim!(&mut s.sim, m => m.set_body_force(f.map(|f| {
+            Box::new(CBodyForce { f, user: user_data, buffers: Default::default() }) as Box<_>
+        })));
+        Ok(())
+    })
+}
+
+unsafe fn add_material(
+    function: &str,
+    sim: *mut RkmpmSim,
+    out_id: *mut u32,
+    make: impl FnOnce() -> crate::Result<Material>,
+) -> RkmpmStatus {
+    gate(function, || {
+        let s = sim_mut(sim)?;
+        check_ptr("out_id", out_id)?;
+        let material = make()?;
+        let id = with_sim!(&mut s.sim, m => m.add_material(material));
+        write_out("out_id", out_id, id)
+    })
+}
+
+/// Adds a small-strain linear elastic material (density > 0, Young's modulus > 0,
+/// -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_id` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_material_linear_elastic(
+    sim: *mut RkmpmSim,
+    density: f64,
+    young: f64,
+    poisson: f64,
+    out_id: *mut u32,
+) -> RkmpmStatus {
+    add_material("rkmpm_sim_add_material_linear_elastic", sim, out_id, || {
+        Material::linear_elastic(density, young, poisson)
+    })
+}
+
+/// Adds a compressible neo-Hookean material (same arguments as the linear elastic one).
+///
+/// # Safety
+/// `sim` must be a live handle; `out_id` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_material_neo_hookean(
+    sim: *mut RkmpmSim,
+    density: f64,
+    young: f64,
+    poisson: f64,
+    out_id: *mut u32,
+) -> RkmpmStatus {
+    add_material("rkmpm_sim_add_material_neo_hookean", sim, out_id, || {
+        Material::neo_hookean(density, young, poisson)
+    })
+}
+
+/// Adds `count` particles of `material`: `positions` (`count * dim`, inside the grid),
+/// `volumes` (`count`, > 0), `velocities` (`count * dim`, or NULL for rest). All or nothing.
+///
+/// # Safety
+/// `sim` must be a live handle; the arrays must hold the stated number of values.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_particles(
+    sim: *mut RkmpmSim,
+    material: u32,
+    count: usize,
+    positions: *const f64,
+    volumes: *const f64,
+    velocities: *const f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_add_particles", || {
+        let s = sim_mut(sim)?;
+        with_sim!(&mut s.sim, m => add_particles(m, material, count, positions, volumes, velocities))
+    })
+}
+
+unsafe fn add_particles<const D: usize>(
+    m: &mut Sim<D>,
+    material: u32,
+    count: usize,
+    positions: *const f64,
+    volumes: *const f64,
+    velocities: *const f64,
+) -> Result<(), Failure> {
+    let n = checked_len("count", count, D)?;
+    let x = vectors::<D>(slice("positions", positions, n)?);
+    let vol = slice("volumes", volumes, count)?;
+    let v = if velocities.is_null() {
+        None
+    } else {
+        Some(vectors::<D>(slice("velocities", velocities, n)?))
+    };
+    m.add_particles(material, &x, vol, v.as_deref())?;
+    Ok(())
+}
+
+/// Writes `cfl · h / max_p(c_p + |v_p|)` to `*out_dt`; `cfl` in (0, 1] (0.2 to 0.5 is usual).
+///
+/// # Safety
+/// `sim` must be a live handle; `out_dt` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_stable_dt(
+    sim: *const RkmpmSim,
+    cfl: f64,
+    out_dt: *mut f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_stable_dt", || {
+        let s = sim_ref(sim)?;
+        check_ptr("out_dt", out_dt)?;
+        let dt = with_sim!(&s.sim, m => m.stable_dt(cfl))?;
+        write_out("out_dt", out_dt, dt)
+    })
+}
+
+/// Advances by `dt`. On failure (`dt` above the critical step, a callback failure, a non-finite
+/// value, an inverted particle, a particle leaving the grid) the simulation keeps its last good
+/// state and the message names the particle and the step.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_step(sim: *mut RkmpmSim, dt: f64) -> RkmpmStatus {
+    gate("rkmpm_sim_step", || {
+        let s = sim_mut(sim)?;
+        with_sim!(&mut s.sim, m => m.step(dt))?;
+        Ok(())
+    })
+}
+
+/// Writes the simulated time to `*out_time`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_time` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_time(sim: *const RkmpmSim, out_time: *mut f64) -> RkmpmStatus {
+    gate("rkmpm_sim_time", || {
+        let s = sim_ref(sim)?;
+        write_out("out_time", out_time, with_sim!(&s.sim, m => m.time()))
+    })
+}
+
+/// Writes the number of steps taken to `*out_steps`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_steps` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_step_count(
+    sim: *const RkmpmSim,
+    out_steps: *mut u64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_step_count", || {
+        let s = sim_ref(sim)?;
+        write_out("out_steps", out_steps, with_sim!(&s.sim, m => m.steps()))
+    })
+}
+
+/// The number of particles (0 for NULL).
+///
+/// # Safety
+/// `sim` must be NULL or a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_particle_count(sim: *const RkmpmSim) -> usize {
+    if sim.is_null() {
+        return 0;
+    }
+    with_sim!(&(*sim).sim, m => m.particles().len())
+}
+
+fn field_from(field: RkmpmField) -> Result<Field, Failure> {
+    Field::ALL
+        .get(field as usize)
+        .copied()
+        .ok_or_else(|| unknown_enum("field", field))
+}
+
+/// Writes to `*out_len` how many values `rkmpm_sim_get_particles` writes for `field`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_len` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_field_len(
+    sim: *const RkmpmSim,
+    field: RkmpmField,
+    out_len: *mut usize,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_field_len", || {
+        let s = sim_ref(sim)?;
+        let f = field_from(field)?;
+        let n = with_sim!(&s.sim, m => f.components(m.grid().cells.len()) * m.particles().len());
+        write_out("out_len", out_len, n)
+    })
+}
+
+/// Copies `field` of every particle into `out` (particle-major, see `RkmpmField`). `len` is the
+/// capacity of `out` in values; when it is smaller than needed, returns
+/// `RKMPM_ERR_BUFFER_TOO_SMALL` and writes nothing.
+///
+/// # Safety
+/// `sim` must be a live handle; `out` valid for `len` writes.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_get_particles(
+    sim: *const RkmpmSim,
+    field: RkmpmField,
+    out: *mut f64,
+    len: usize,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_get_particles", || {
+        let s = sim_ref(sim)?;
+        let f = field_from(field)?;
+        with_sim!(&s.sim, m => {
+            let need = f.components(m.grid().cells.len()) * m.particles().len();
+            if len < need {
+                return Err(Failure::new(
+                    RKMPM_ERR_BUFFER_TOO_SMALL,
+                    format!("field {} needs {need} values, the buffer holds {len}", f.name()),
+                ));
+            }
+            if need > 0 {
+                check_ptr("out", out)?;
+                m.particles().write_field(f, std::slice::from_raw_parts_mut(out, need));
+            }
+        });
+        Ok(())
+    })
+}
+
+/// Writes the particles and their fields to one VTK `.vtu` file at `path` (UTF-8).
+///
+/// # Safety
+/// `sim` must be a live handle; `path` a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_write_vtk(sim: *const RkmpmSim, path: *const c_char) -> RkmpmStatus {
+    gate("rkmpm_sim_write_vtk", || {
+        let s = sim_ref(sim)?;
+        let path = c_path("path", path)?;
+        with_sim!(&s.sim, m => vtk::write_particles(m, path))?;
+        Ok(())
+    })
+}
+
+/// Writes the next frame of the time series `prefix`: `<prefix>_NNNNN.vtu`, and rewrites
+/// `<prefix>.pvd` (open it in ParaView) listing every frame this simulation wrote under `prefix`.
+///
+/// # Safety
+/// `sim` must be a live handle; `prefix` a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_write_vtk_frame(
+    sim: *mut RkmpmSim,
+    prefix: *const c_char,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_write_vtk_frame", || {
+        let s = sim_mut(sim)?;
+        let prefix = c_path("prefix", prefix)?;
+        let k = match s.series.iter().position(|v| v.prefix() == std::path::Path::new(prefix)) {
+            Some(k) => k,
+            None => {
+                s.series.push(VtkSeries::new(prefix));
+                s.series.len() - 1
+            }
+        };
+        let series = &mut s.series[k];
+        with_sim!(&s.sim, m => series.write_frame(m))?;
+        Ok(())
+    })
+}

@@ -1,0 +1,143 @@
+//! Particle output as VTK XML unstructured grids (`.vtu`, one vertex cell per particle) and
+//! ParaView time-series collections (`.pvd`). Files are written to a temporary name and renamed,
+//! so a reader never sees a half-written file.
+
+use crate::error::Result;
+use crate::particles::Field;
+use crate::sim::Sim;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Writes `text` to `path` through a temporary file in the same directory.
+fn write_atomically(path: &Path, text: &str) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, text)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
+
+fn data_array(out: &mut String, name: &str, components: usize, values: impl Iterator<Item = f64>) {
+    let _ = write!(
+        out,
+        "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"ascii\">\n"
+    );
+    for (i, v) in values.enumerate() {
+        let _ = write!(out, "{v:e}");
+        out.push(if (i + 1) % components == 0 { '\n' } else { ' ' });
+    }
+    out.push_str("</DataArray>\n");
+}
+
+/// Pads `D` components per particle to 3 (VTK vectors are 3D).
+fn pad3(values: &[f64], d: usize) -> impl Iterator<Item = f64> + '_ {
+    values
+        .chunks_exact(d)
+        .flat_map(move |c| (0..3).map(move |k| if k < d { c[k] } else { 0.0 }))
+}
+
+/// Pads `D×D` row-major tensors per particle to 3×3.
+fn pad33(values: &[f64], d: usize) -> impl Iterator<Item = f64> + '_ {
+    values.chunks_exact(d * d).flat_map(move |c| {
+        (0..9).map(move |k| {
+            let (i, j) = (k / 3, k % 3);
+            if i < d && j < d {
+                c[i * d + j]
+            } else {
+                0.0
+            }
+        })
+    })
+}
+
+/// The `.vtu` text of the particles of `sim`: points, and point data `velocity`, `displacement`,
+/// `stress` (3×3, plane components zero-padded in 2D), `pressure`, `volume`, `mass`, `material`.
+pub fn particles_vtu<const D: usize>(sim: &Sim<D>) -> String {
+    let ps = sim.particles();
+    let n = ps.len();
+    let mut s = String::with_capacity(200 * n + 1024);
+    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
+    let _ = writeln!(
+        s,
+        "<FieldData><DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" format=\"ascii\">{:e}</DataArray></FieldData>",
+        sim.time()
+    );
+    let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">");
+    s.push_str("<Points>\n");
+    data_array(&mut s, "position", 3, pad3(&sim.field(Field::Position), D));
+    s.push_str("</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
+    for p in 0..n {
+        let _ = write!(s, "{p} ");
+    }
+    s.push_str("\n</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
+    for p in 0..n {
+        let _ = write!(s, "{} ", p + 1);
+    }
+    s.push_str("\n</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
+    s.push_str(&"1 ".repeat(n));
+    s.push_str("\n</DataArray>\n</Cells>\n<PointData Vectors=\"velocity\" Scalars=\"pressure\">\n");
+    data_array(&mut s, "velocity", 3, pad3(&sim.field(Field::Velocity), D));
+    data_array(&mut s, "displacement", 3, pad3(&sim.field(Field::Displacement), D));
+    data_array(&mut s, "stress", 9, pad33(&sim.field(Field::Stress), D));
+    for f in [Field::Pressure, Field::Volume, Field::Mass] {
+        data_array(&mut s, f.name(), 1, sim.field(f).into_iter());
+    }
+    data_array(&mut s, "material", 1, ps.material.iter().map(|&m| m as f64));
+    s.push_str("</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+    s
+}
+
+/// Writes the particles of `sim` to one `.vtu` file.
+pub fn write_particles<const D: usize>(sim: &Sim<D>, path: impl AsRef<Path>) -> Result<()> {
+    write_atomically(path.as_ref(), &particles_vtu(sim))
+}
+
+/// A time series: frames `<prefix>_00000.vtu, …` and the collection `<prefix>.pvd` that lists
+/// them with their times (open the `.pvd` in ParaView).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VtkSeries {
+    prefix: PathBuf,
+    frames: Vec<(f64, String)>,
+}
+
+impl VtkSeries {
+    pub fn new(prefix: impl Into<PathBuf>) -> Self {
+        VtkSeries {
+            prefix: prefix.into(),
+            frames: Vec::new(),
+        }
+    }
+
+    pub fn prefix(&self) -> &Path {
+        &self.prefix
+    }
+
+    pub fn frames(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Writes the next frame and rewrites the collection file.
+    pub fn write_frame<const D: usize>(&mut self, sim: &Sim<D>) -> Result<PathBuf> {
+        let stem = self
+            .prefix
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "frame".into());
+        let name = format!("{stem}_{:05}.vtu", self.frames.len());
+        let path = self.prefix.with_file_name(&name);
+        write_particles(sim, &path)?;
+        self.frames.push((sim.time(), name));
+        let mut pvd = String::from(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n",
+        );
+        for (t, file) in &self.frames {
+            let _ = writeln!(pvd, "<DataSet timestep=\"{t:e}\" group=\"\" part=\"0\" file=\"{file}\"/>");
+        }
+        pvd.push_str("</Collection>\n</VTKFile>\n");
+        let mut pvd_path = self.prefix.clone().into_os_string();
+        pvd_path.push(".pvd");
+        write_atomically(Path::new(&pvd_path), &pvd)?;
+        Ok(path)
+    }
+}
