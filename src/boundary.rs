@@ -103,7 +103,13 @@ fn depth<const D: usize>(grid: &Grid<D>, i: &[i64; D], axis: usize, side: Side) 
 }
 
 #[inline]
-fn mirror<const D: usize>(grid: &Grid<D>, mut i: [i64; D], axis: usize, side: Side, d: i64) -> [i64; D] {
+fn mirror<const D: usize>(
+    grid: &Grid<D>,
+    mut i: [i64; D],
+    axis: usize,
+    side: Side,
+    d: i64,
+) -> [i64; D] {
     i[axis] = match side {
         Side::Low => d,
         Side::High => grid.cells[axis] as i64 - d,

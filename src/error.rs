@@ -71,7 +71,9 @@ pub fn check_finite(name: &str, value: f64) -> Result<()> {
     if value.is_finite() {
         Ok(())
     } else {
-        Err(Error::invalid(format!("{name} must be finite, got {value}")))
+        Err(Error::invalid(format!(
+            "{name} must be finite, got {value}"
+        )))
     }
 }
 

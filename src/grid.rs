@@ -205,7 +205,10 @@ mod tests {
             assert_eq!(g.node_index(g.node_multi_index(n)), n);
         }
         assert_eq!(g.node_index([-2, -2, -2]), 0);
-        assert_eq!(g.node_position([1, 0, -1]), Vector::<3>::new(-0.5, 0.0, 1.5));
+        assert_eq!(
+            g.node_position([1, 0, -1]),
+            Vector::<3>::new(-0.5, 0.0, 1.5)
+        );
         assert_eq!(g.upper(), Vector::<3>::new(1.0, 2.5, 5.0));
     }
 

@@ -28,6 +28,7 @@ pub mod grid;
 pub mod io;
 pub mod material;
 pub mod particles;
+pub mod scenes;
 pub mod shape;
 pub mod sim;
 pub mod step;

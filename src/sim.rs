@@ -241,11 +241,15 @@ impl<const D: usize> Sim<D> {
         })?;
         let n = positions.len();
         if volumes.len() != n || velocities.is_some_and(|v| v.len() != n) {
-            return Err(Error::invalid("positions, volumes and velocities differ in length"));
+            return Err(Error::invalid(
+                "positions, volumes and velocities differ in length",
+            ));
         }
         for (p, x) in positions.iter().enumerate() {
             if x.iter().any(|c| !c.is_finite()) {
-                return Err(Error::invalid(format!("position of particle {p} is not finite")));
+                return Err(Error::invalid(format!(
+                    "position of particle {p} is not finite"
+                )));
             }
             if !self.grid.contains(x) {
                 return Err(Error::new(
@@ -261,7 +265,9 @@ impl<const D: usize> Sim<D> {
             check_positive(&format!("volume of particle {p}"), volumes[p])?;
             if let Some(v) = velocities {
                 if v[p].iter().any(|c| !c.is_finite()) {
-                    return Err(Error::invalid(format!("velocity of particle {p} is not finite")));
+                    return Err(Error::invalid(format!(
+                        "velocity of particle {p} is not finite"
+                    )));
                 }
             }
         }
@@ -278,7 +284,8 @@ impl<const D: usize> Sim<D> {
             .extend(std::iter::repeat_n(Matrix::<D>::identity(), n));
         ps.reference_volume.extend_from_slice(volumes);
         ps.mass.extend(volumes.iter().map(|v| rho * v));
-        ps.stress.extend(std::iter::repeat_n(Matrix::<D>::zeros(), n));
+        ps.stress
+            .extend(std::iter::repeat_n(Matrix::<D>::zeros(), n));
         ps.pressure.extend(std::iter::repeat_n(0.0, n));
         ps.material.extend(std::iter::repeat_n(material, n));
         if apic {
@@ -300,7 +307,9 @@ impl<const D: usize> Sim<D> {
     /// `h / max_p(c_p + |v_p|)`, the step above which explicit MPM is unstable.
     pub(crate) fn critical_dt(&self) -> Result<f64> {
         if self.particles.is_empty() {
-            return Err(Error::state("no particles: the stable time step is undefined"));
+            return Err(Error::state(
+                "no particles: the stable time step is undefined",
+            ));
         }
         let ps = &self.particles;
         let speed = (0..ps.len())

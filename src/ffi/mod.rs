@@ -21,8 +21,8 @@ use crate::shape::Shape;
 use crate::sim::{BodyForce, Integration, Scheme, Sim, Transfer};
 use crate::Vector;
 use gate::{check_ptr, checked_len, gate, slice, unknown_enum, Failure};
-use std::ffi::{c_char, c_void, CStr};
 pub use status::RkmpmStatus;
+use std::ffi::{c_char, c_void, CStr};
 use RkmpmStatus::*;
 
 /// Version of the binary interface; changes whenever a signature, a struct or an enum value changes.
@@ -152,7 +152,10 @@ unsafe fn write_out<T>(name: &str, out: *mut T, value: T) -> Result<(), Failure>
 }
 
 fn vectors<const D: usize>(values: &[f64]) -> Vec<Vector<D>> {
-    values.chunks_exact(D).map(Vector::<D>::from_column_slice).collect()
+    values
+        .chunks_exact(D)
+        .map(Vector::<D>::from_column_slice)
+        .collect()
 }
 
 unsafe fn c_path<'a>(name: &str, path: *const c_char) -> Result<&'a str, Failure> {
@@ -359,7 +362,10 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
 /// # Safety
 /// `sim` must be a live handle.
 #[no_mangle]
-pub unsafe extern "C" fn rkmpm_sim_set_scheme(sim: *mut RkmpmSim, scheme: RkmpmScheme) -> RkmpmStatus {
+pub unsafe extern "C" fn rkmpm_sim_set_scheme(
+    sim: *mut RkmpmSim,
+    scheme: RkmpmScheme,
+) -> RkmpmStatus {
     gate("rkmpm_sim_set_scheme", || {
         let s = sim_mut(sim)?;
         let scheme = match scheme {
@@ -440,7 +446,15 @@ impl<const D: usize> BodyForce<D> for CBodyForce {
         a.resize(x.len(), 0.0);
         // SAFETY: the caller promised `f` is callable with arrays of `count * dim` values.
         let rc = unsafe {
-            (self.f)(self.user, time, out.len(), D as u32, x0.as_ptr(), x.as_ptr(), a.as_mut_ptr())
+            (self.f)(
+                self.user,
+                time,
+                out.len(),
+                D as u32,
+                x0.as_ptr(),
+                x.as_ptr(),
+                a.as_mut_ptr(),
+            )
         };
         if rc != 0 {
             return Err(format!("the callback returned {rc}"));
@@ -697,7 +711,10 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
 /// # Safety
 /// `sim` must be a live handle; `path` a NUL-terminated string.
 #[no_mangle]
-pub unsafe extern "C" fn rkmpm_sim_write_vtk(sim: *const RkmpmSim, path: *const c_char) -> RkmpmStatus {
+pub unsafe extern "C" fn rkmpm_sim_write_vtk(
+    sim: *const RkmpmSim,
+    path: *const c_char,
+) -> RkmpmStatus {
     gate("rkmpm_sim_write_vtk", || {
         let s = sim_ref(sim)?;
         let path = c_path("path", path)?;
@@ -719,7 +736,11 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk_frame(
     gate("rkmpm_sim_write_vtk_frame", || {
         let s = sim_mut(sim)?;
         let prefix = c_path("prefix", prefix)?;
-        let k = match s.series.iter().position(|v| v.prefix() == std::path::Path::new(prefix)) {
+        let k = match s
+            .series
+            .iter()
+            .position(|v| v.prefix() == std::path::Path::new(prefix))
+        {
             Some(k) => k,
             None => {
                 s.series.push(VtkSeries::new(prefix));

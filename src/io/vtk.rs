@@ -66,7 +66,9 @@ pub fn particles_vtu<const D: usize>(sim: &Sim<D>) -> String {
     let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">");
     s.push_str("<Points>\n");
     data_array(&mut s, "position", 3, pad3(&sim.field(Field::Position), D));
-    s.push_str("</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
+    s.push_str(
+        "</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n",
+    );
     for p in 0..n {
         let _ = write!(s, "{p} ");
     }
@@ -78,7 +80,12 @@ pub fn particles_vtu<const D: usize>(sim: &Sim<D>) -> String {
     s.push_str(&"1 ".repeat(n));
     s.push_str("\n</DataArray>\n</Cells>\n<PointData Vectors=\"velocity\" Scalars=\"pressure\">\n");
     data_array(&mut s, "velocity", 3, pad3(&sim.field(Field::Velocity), D));
-    data_array(&mut s, "displacement", 3, pad3(&sim.field(Field::Displacement), D));
+    data_array(
+        &mut s,
+        "displacement",
+        3,
+        pad3(&sim.field(Field::Displacement), D),
+    );
     data_array(&mut s, "stress", 9, pad33(&sim.field(Field::Stress), D));
     for f in [Field::Pressure, Field::Volume, Field::Mass] {
         data_array(&mut s, f.name(), 1, sim.field(f).into_iter());
@@ -132,7 +139,10 @@ impl VtkSeries {
             "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n",
         );
         for (t, file) in &self.frames {
-            let _ = writeln!(pvd, "<DataSet timestep=\"{t:e}\" group=\"\" part=\"0\" file=\"{file}\"/>");
+            let _ = writeln!(
+                pvd,
+                "<DataSet timestep=\"{t:e}\" group=\"\" part=\"0\" file=\"{file}\"/>"
+            );
         }
         pvd.push_str("</Collection>\n</VTKFile>\n");
         let mut pvd_path = self.prefix.clone().into_os_string();

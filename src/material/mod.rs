@@ -36,9 +36,9 @@ pub enum Material {
 impl Material {
     /// Linear elastic material from density, Young's modulus and Poisson's ratio.
     pub fn linear_elastic(density: f64, young: f64, poisson: f64) -> Result<Self> {
-        Ok(Material::LinearElastic(LinearElastic(ElasticConstants::new(
-            density, young, poisson,
-        )?)))
+        Ok(Material::LinearElastic(LinearElastic(
+            ElasticConstants::new(density, young, poisson)?,
+        )))
     }
 
     /// Compressible neo-Hookean material from density, Young's modulus and Poisson's ratio.

@@ -57,7 +57,10 @@ impl BSplineOrder {
             }
             BSplineOrder::Cubic => {
                 if r < 1.0 {
-                    (0.5 * r * r * r - r * r + 2.0 / 3.0, s * (1.5 * r * r - 2.0 * r))
+                    (
+                        0.5 * r * r * r - r * r + 2.0 / 3.0,
+                        s * (1.5 * r * r - 2.0 * r),
+                    )
                 } else if r < 2.0 {
                     let t = 2.0 - r;
                     (t * t * t / 6.0, -s * 0.5 * t * t)
@@ -119,6 +122,13 @@ impl<const D: usize> ShapeFunction<D> for BSpline {
         let mut dw = [[0.0f64; 4]; D];
         for a in 0..D {
             first[a] = self.order.first_node(xi[a]);
+            if self.order == BSplineOrder::Linear {
+                // The two nodes of the cell, with the cell's one-sided gradient also on a node.
+                let r = xi[a] - first[a] as f64;
+                w[a][..2].copy_from_slice(&[1.0 - r, r]);
+                dw[a][..2].copy_from_slice(&[-inv_h, inv_h]);
+                continue;
+            }
             for k in 0..width {
                 let (v, dv) = self.order.kernel(xi[a] - (first[a] + k as i64) as f64);
                 w[a][k] = v;

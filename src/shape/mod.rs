@@ -94,7 +94,11 @@ impl<const D: usize> Stencils<D> {
     #[inline]
     pub fn of(&self, p: usize) -> (&[usize], &[f64], &[Vector<D>]) {
         let r = p * self.len..(p + 1) * self.len;
-        (&self.nodes[r.clone()], &self.values[r.clone()], &self.gradients[r])
+        (
+            &self.nodes[r.clone()],
+            &self.values[r.clone()],
+            &self.gradients[r],
+        )
     }
 }
 

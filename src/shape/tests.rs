@@ -69,8 +69,15 @@ fn check_consistency<const D: usize>(shape: Shape, check_fd: bool) {
         }
         // Round-off: a few ulps of O(1) sums over at most 64 terms.
         assert!((sum - 1.0).abs() < 1e-13, "{shape:?} at {x}: ΣΨ = {sum}");
-        assert!((first - x).norm() < 1e-13, "{shape:?} at {x}: ΣΨx_I − x = {}", first - x);
-        assert!(grad_sum.norm() < 1e-12, "{shape:?} at {x}: Σ∇Ψ = {grad_sum}");
+        assert!(
+            (first - x).norm() < 1e-13,
+            "{shape:?} at {x}: ΣΨx_I − x = {}",
+            first - x
+        );
+        assert!(
+            grad_sum.norm() < 1e-12,
+            "{shape:?} at {x}: Σ∇Ψ = {grad_sum}"
+        );
         assert!(
             (grad_first - Matrix::<D>::identity()).norm() < 1e-12,
             "{shape:?} at {x}: Σ x_I ⊗ ∇Ψ = {grad_first}"
@@ -78,8 +85,10 @@ fn check_consistency<const D: usize>(shape: Shape, check_fd: bool) {
         if check_fd {
             // Central differences, step 1e-6 h: truncation O(1e-12) and round-off O(1e-10)/h.
             let eps = 1e-6 * grid.cell_size;
-            let (mut np, mut wp, mut gp) = (vec![0; n], vec![0.0; n], vec![Vector::<D>::zeros(); n]);
-            let (mut nm, mut wm, mut gm) = (vec![0; n], vec![0.0; n], vec![Vector::<D>::zeros(); n]);
+            let (mut np, mut wp, mut gp) =
+                (vec![0; n], vec![0.0; n], vec![Vector::<D>::zeros(); n]);
+            let (mut nm, mut wm, mut gm) =
+                (vec![0; n], vec![0.0; n], vec![Vector::<D>::zeros(); n]);
             for a in 0..D {
                 let mut e = Vector::<D>::zeros();
                 e[a] = eps;
@@ -87,7 +96,10 @@ fn check_consistency<const D: usize>(shape: Shape, check_fd: bool) {
                 f.evaluate(&grid, &(x - e), &mut nm, &mut wm, &mut gm);
                 for s in 0..n {
                     let value_at = |nn: &[usize], ww: &[f64]| {
-                        nn.iter().zip(ww).find(|(&k, _)| k == nodes[s]).map_or(0.0, |(_, &v)| v)
+                        nn.iter()
+                            .zip(ww)
+                            .find(|(&k, _)| k == nodes[s])
+                            .map_or(0.0, |(_, &v)| v)
                     };
                     let fd = (value_at(&np, &wp) - value_at(&nm, &wm)) / (2.0 * eps);
                     assert!(
@@ -137,13 +149,22 @@ fn bspline_apic_inertia_matches_its_definition() {
                 let r = grid.node_position(grid.node_multi_index(nodes[s])) - x;
                 m += w[s] * r * r.transpose();
             }
-            assert!((m - d * Matrix::<2>::identity()).norm() < 1e-14, "{shape:?}: {m}");
+            assert!(
+                (m - d * Matrix::<2>::identity()).norm() < 1e-14,
+                "{shape:?}: {m}"
+            );
         }
     }
 }
 
 #[test]
 fn rk_is_refused_until_it_lands() {
-    let e = Shape::Rk { order: 1, support: 2.0 }.build::<2>().err().unwrap();
+    let e = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    }
+    .build::<2>()
+    .err()
+    .unwrap();
     assert_eq!(e.kind, crate::ErrorKind::Unsupported);
 }

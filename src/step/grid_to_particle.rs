@@ -123,7 +123,8 @@ pub fn grid_to_particle<const D: usize>(
             };
         }
         if update_deformation {
-            u.deformation_gradient = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+            u.deformation_gradient =
+                (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
         }
     });
 }

@@ -93,7 +93,10 @@ impl<const D: usize> Sim<D> {
             Transfer::Apic => TransferPlan {
                 flip: 0.0,
                 apic: true,
-                inverse_inertia: self.shape.apic_inertia(self.grid.cell_size).map(|d| 1.0 / d),
+                inverse_inertia: self
+                    .shape
+                    .apic_inertia(self.grid.cell_size)
+                    .map(|d| 1.0 / d),
             },
         }
     }
@@ -109,7 +112,8 @@ impl<const D: usize> Sim<D> {
         }
 
         // 1. Shape functions, once per particle.
-        work.stencils.compute(self.shape.as_ref(), grid, &ps.position);
+        work.stencils
+            .compute(self.shape.as_ref(), grid, &ps.position);
 
         // 2. Body forces.
         let body = match self.body_force.as_mut() {
@@ -146,19 +150,35 @@ impl<const D: usize> Sim<D> {
             ps,
             &work.stencils,
             &velocity,
-            plan.apic.then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+            plan.apic
+                .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
             Some((self.options.gravity, body)),
             &mut work.nodes,
         );
 
         // 4. Grid update with the wall conditions.
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
-        grid_update(grid, &self.options.walls, &mut work.nodes, Some(dt), mass_floor);
+        grid_update(
+            grid,
+            &self.options.walls,
+            &mut work.nodes,
+            Some(dt),
+            mass_floor,
+        );
 
         // 5. Grid to particle.
         let mut updates = std::mem::take(&mut work.updates);
         let usl = self.options.scheme == Scheme::Usl;
-        grid_to_particle(grid, ps, &work.stencils, &work.nodes, plan, dt, usl, &mut updates);
+        grid_to_particle(
+            grid,
+            ps,
+            &work.stencils,
+            &work.nodes,
+            plan,
+            dt,
+            usl,
+            &mut updates,
+        );
         if !usl {
             // MUSL: map the new particle momenta to the grid again; the velocity gradient uses
             // those grid velocities.
@@ -172,7 +192,8 @@ impl<const D: usize> Sim<D> {
                 ps,
                 &work.stencils,
                 &velocity,
-                plan.apic.then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+                plan.apic
+                    .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
                 None,
                 &mut work.nodes,
             );
@@ -181,7 +202,8 @@ impl<const D: usize> Sim<D> {
             let stencils = &work.stencils;
             updates.par_iter_mut().enumerate().for_each(|(p, u)| {
                 let l = velocity_gradient(stencils, nodes, p);
-                u.deformation_gradient = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+                u.deformation_gradient =
+                    (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
             });
         }
 
@@ -189,14 +211,18 @@ impl<const D: usize> Sim<D> {
         let materials = &self.materials;
         updates.par_iter_mut().enumerate().for_each(|(p, u)| {
             if crate::determinant(&u.deformation_gradient) > 0.0 {
-                let s3 = materials[ps.material[p] as usize].cauchy_stress(&embed3(&u.deformation_gradient));
+                let s3 = materials[ps.material[p] as usize]
+                    .cauchy_stress(&embed3(&u.deformation_gradient));
                 u.stress = block(&s3);
                 u.pressure = pressure(&s3);
             }
         });
 
         // Checks: the first bad particle (lowest index) is reported.
-        let bad = updates.par_iter().enumerate().find_first(|(_, u)| u.check(grid).is_err());
+        let bad = updates
+            .par_iter()
+            .enumerate()
+            .find_first(|(_, u)| u.check(grid).is_err());
         if let Some((p, u)) = bad {
             let (kind, what) = u.check(grid).unwrap_err();
             let message = format!(

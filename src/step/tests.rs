@@ -1,1 +1,372 @@
+//! Tests of the step: conservation in the transfers, the vibrating bar against its exact
+//! solution, wall conditions, and the guards that keep the last good state.
 
+use crate::boundary::{Boundary, Side};
+use crate::error::ErrorKind;
+use crate::material::Material;
+use crate::scenes::{run_vibrating_bar, VibratingBar};
+use crate::shape::Shape;
+use crate::sim::{Scheme, Sim, Transfer};
+use crate::{Matrix, Vector};
+
+/// A block of `n^D` particles, 2 per cell, with a spin and a shear in its velocity.
+fn block<const D: usize>(shape: Shape, transfer: Transfer) -> Sim<D> {
+    let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [12; D], 0.1).unwrap();
+    sim.set_shape(shape).unwrap();
+    sim.set_transfer(transfer).unwrap();
+    let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+    let mut x = Vec::new();
+    let n = 8usize;
+    for k in 0..n.pow(D as u32) {
+        let mut p = Vector::<D>::zeros();
+        let mut r = k;
+        for a in 0..D {
+            // Slightly irregular spacing so that no particle sits on a node or a cell centre.
+            p[a] = 0.3125 + 0.05 * (r % n) as f64 + 0.003 * ((k * 7 + a * 3) % 5) as f64;
+            r /= n;
+        }
+        x.push(p);
+    }
+    let v: Vec<Vector<D>> = x
+        .iter()
+        .map(|p| {
+            let c = p - Vector::<D>::from_element(0.5);
+            let mut v = Vector::<D>::from_element(0.1);
+            v[0] += -0.6 * c[1];
+            v[1] += 0.75 * c[0];
+            v
+        })
+        .collect();
+    let vol = vec![0.05f64.powi(D as i32); x.len()];
+    sim.add_particles(m, &x, &vol, Some(&v)).unwrap();
+    sim
+}
+
+fn angular_momentum_2d(sim: &Sim<2>) -> f64 {
+    let ps = sim.particles();
+    let mut l = 0.0;
+    for p in 0..ps.len() {
+        let (x, v) = (ps.position[p], ps.velocity[p]);
+        l += ps.mass[p] * (x[0] * v[1] - x[1] * v[0]);
+        if !ps.affine.is_empty() {
+            // APIC carries angular momentum in C_p too: m_p D_p (C_p - C_pᵀ) part; with
+            // D_p = d I that is m_p d (C_10 - C_01).
+            let d = sim.shape.apic_inertia(sim.grid.cell_size).unwrap_or(0.0);
+            let c = ps.affine[p];
+            l += ps.mass[p] * d * (c[(1, 0)] - c[(0, 1)]);
+        }
+    }
+    l
+}
+
+/// Linear momentum is conserved by a step with free walls and no external force, for every
+/// shape function and transfer: internal forces sum to zero because Σ_I ∇Ψ_I = 0, and PIC,
+/// FLIP and APIC all return Σ_I m_I v_I to the particles because Σ_I Ψ_I = 1.
+#[test]
+fn step_conserves_mass_and_linear_momentum() {
+    for shape in [Shape::Linear, Shape::BSpline2, Shape::BSpline3] {
+        for transfer in [
+            Transfer::PicFlip { flip: 0.0 },
+            Transfer::PicFlip { flip: 0.95 },
+            Transfer::Apic,
+        ] {
+            for scheme in [Scheme::Usl, Scheme::Musl] {
+                let mut sim = block::<2>(shape, transfer);
+                sim.set_scheme(scheme).unwrap();
+                let p0 = sim.particles().momentum();
+                let m0: f64 = sim.particles().mass.iter().sum();
+                let dt = sim.stable_dt(0.3).unwrap();
+                for _ in 0..10 {
+                    sim.step(dt)
+                        .unwrap_or_else(|e| panic!("{shape:?} {transfer:?} {scheme:?}: {e}"));
+                }
+                let p1 = sim.particles().momentum();
+                // Sums of ~500 terms of size |p0|: round-off ~1e-14 relative; the 1e-10 mass
+                // floor drops no node here (every active node has far more mass).
+                assert!(
+                    (p1 - p0).norm() < 1e-12 * p0.norm(),
+                    "{shape:?} {transfer:?} {scheme:?}: momentum {p0} -> {p1}"
+                );
+                let m1: f64 = sim.particles().mass.iter().sum();
+                assert_eq!(m0, m1);
+                assert!(sim.work.nodes.is_clear(), "grid not reset");
+            }
+        }
+    }
+}
+
+/// APIC also conserves angular momentum (Jiang et al. 2015); a full step adds the torque of the
+/// internal forces, which is zero for a symmetric stress. PIC loses it.
+#[test]
+fn apic_conserves_angular_momentum_pic_does_not() {
+    let mut apic = block::<2>(Shape::BSpline2, Transfer::Apic);
+    let mut pic = block::<2>(Shape::BSpline2, Transfer::PicFlip { flip: 0.0 });
+    let (l0a, l0p) = (angular_momentum_2d(&apic), angular_momentum_2d(&pic));
+    let dt = apic.stable_dt(0.3).unwrap();
+    for _ in 0..20 {
+        apic.step(dt).unwrap();
+        pic.step(dt).unwrap();
+    }
+    let (l1a, l1p) = (angular_momentum_2d(&apic), angular_momentum_2d(&pic));
+    assert!(
+        (l1a - l0a).abs() < 1e-10 * l0a.abs(),
+        "APIC: {l0a} -> {l1a}"
+    );
+    assert!(
+        (l1p - l0p).abs() > 1e-3 * l0p.abs(),
+        "PIC kept angular momentum: {l0p} -> {l1p}"
+    );
+}
+
+fn check_bar<const D: usize>(scheme: Scheme) {
+    let bar = VibratingBar::default();
+    let mut sim = bar.build::<D>().unwrap();
+    sim.set_scheme(scheme).unwrap();
+    let r = run_vibrating_bar(&bar, &mut sim, 0.2).unwrap();
+    let period_error = (r.period - r.exact_period).abs() / r.exact_period;
+    eprintln!(
+        "{D}D {scheme:?}: velocity error {:.4}, period error {period_error:.5}",
+        r.velocity_error
+    );
+    assert!(
+        period_error < 0.01,
+        "{D}D: period {} vs {}",
+        r.period,
+        r.exact_period
+    );
+    assert!(
+        r.velocity_error < 0.03,
+        "{D}D: velocity error {}",
+        r.velocity_error
+    );
+}
+
+/// METHOD.md 6.5 at 32 cells along the bar with the quadratic B-spline: period within 1% and the
+/// mean-velocity history within 3% of the exact one over a whole period.
+#[test]
+fn vibrating_bar_2d_matches_exact_solution() {
+    check_bar::<2>(Scheme::Usl);
+    check_bar::<2>(Scheme::Musl);
+}
+
+#[test]
+fn vibrating_bar_3d_matches_exact_solution() {
+    check_bar::<3>(Scheme::Usl);
+}
+
+/// A block resting on a slip floor under gravity keeps its tangential momentum exactly while it
+/// bounces; on a friction floor it decelerates at μ g, as Coulomb's law says.
+#[test]
+fn slip_and_friction_floors() {
+    let run = |floor: Boundary| {
+        let mut sim = Sim::<2>::new([0.0, 0.0], [40, 10], 0.05).unwrap();
+        sim.set_boundary(1, Side::Low, floor).unwrap();
+        sim.set_gravity([0.0, -10.0]).unwrap();
+        let m = sim.add_material(Material::neo_hookean(1000.0, 1e6, 0.3).unwrap());
+        let mut x = Vec::new();
+        for j in 0..8 {
+            for i in 0..16 {
+                x.push(Vector::<2>::new(
+                    0.2 + 0.025 * (i as f64 + 0.5),
+                    0.025 * (j as f64 + 0.5),
+                ));
+            }
+        }
+        let v = vec![Vector::<2>::new(1.0, 0.0); x.len()];
+        sim.add_particles(m, &x, &vec![0.025 * 0.025; x.len()], Some(&v))
+            .unwrap();
+        let dt = sim.stable_dt(0.3).unwrap();
+        let steps = (0.05 / dt).ceil() as usize;
+        for _ in 0..steps {
+            sim.step(dt).unwrap();
+        }
+        let mass: f64 = sim.particles().mass.iter().sum();
+        (sim.particles().momentum()[0] / mass, sim.time())
+    };
+    let (v_slip, _) = run(Boundary::Slip);
+    assert!(
+        (v_slip - 1.0).abs() < 1e-12,
+        "slip floor changed tangential velocity: {v_slip}"
+    );
+    let mu = 0.4;
+    let (v_fric, t) = run(Boundary::Friction(mu));
+    let expected = 1.0 - mu * 10.0 * t;
+    eprintln!("friction: v = {v_fric}, Coulomb {expected}");
+    assert!(
+        (v_fric - expected).abs() < 0.1 * (1.0 - expected),
+        "v = {v_fric}, Coulomb {expected}"
+    );
+}
+
+/// A fixed floor stops a falling block: after it settles, the mean velocity is near zero and no
+/// particle went below the floor.
+#[test]
+fn fixed_floor_holds_a_block() {
+    let mut sim = Sim::<2>::new([0.0, 0.0], [10, 10], 0.1).unwrap();
+    sim.set_boundary(1, Side::Low, Boundary::Fixed).unwrap();
+    sim.set_gravity([0.0, -10.0]).unwrap();
+    let m = sim.add_material(Material::neo_hookean(100.0, 1e5, 0.3).unwrap());
+    let mut x = Vec::new();
+    for j in 0..8 {
+        for i in 0..8 {
+            x.push(Vector::<2>::new(
+                0.3 + 0.05 * (i as f64 + 0.5),
+                0.05 * (j as f64 + 0.5),
+            ));
+        }
+    }
+    sim.add_particles(m, &x, &vec![0.0025; x.len()], None)
+        .unwrap();
+    let dt = sim.stable_dt(0.3).unwrap();
+    while sim.time() < 0.5 {
+        sim.step(dt).unwrap();
+    }
+    let ps = sim.particles();
+    assert!(ps.position.iter().all(|x| x[1] >= 0.0));
+    // Free fall for 0.5 s would give 5 m/s; resting on the floor gives elastic oscillation
+    // of order g·(period) ≈ 10 · 0.01 m/s.
+    let mass: f64 = ps.mass.iter().sum();
+    let v = ps.momentum() / mass;
+    assert!(v.norm() < 0.05, "mean velocity {v}");
+}
+
+/// A rejected step changes nothing: the particle data stay bit for bit, time and step count too.
+#[test]
+fn rejected_steps_keep_the_last_good_state() {
+    let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+    let dt = sim.stable_dt(0.3).unwrap();
+    sim.step(dt).unwrap();
+    let before = sim.particles().clone();
+    let (t, n) = (sim.time(), sim.steps());
+
+    // dt far above the critical step.
+    let e = sim.step(100.0 * dt).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::UnstableTimeStep);
+    assert_eq!(sim.particles(), &before);
+
+    // A body force that fails, and one that returns NaN.
+    sim.set_body_force(Some(Box::new(
+        |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], _a: &mut [Vector<2>]| Err("no".to_string()),
+    )));
+    assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::Callback);
+    sim.set_body_force(Some(Box::new(
+        |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], a: &mut [Vector<2>]| {
+            a[3] = Vector::<2>::new(f64::NAN, 0.0);
+            Ok(())
+        },
+    )));
+    assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::Callback);
+
+    // A body force that tears the block apart with huge accelerations: non-finite stress.
+    sim.set_body_force(Some(Box::new(
+        |_t: f64, _x0: &[Vector<2>], x: &[Vector<2>], a: &mut [Vector<2>]| {
+            for (a, x) in a.iter_mut().zip(x) {
+                *a = Vector::<2>::new(if x[0] < 0.5 { -1e308 } else { 1e308 }, 0.0);
+            }
+            Ok(())
+        },
+    )));
+    let e = sim.step(dt).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::NonFinite, "{e}");
+    assert!(
+        e.message.contains("particle") && e.message.contains("step 2"),
+        "{e}"
+    );
+
+    // A body force that pushes everything out of the grid within one step.
+    sim.set_body_force(Some(Box::new(
+        |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], a: &mut [Vector<2>]| {
+            a.iter_mut().for_each(|a| *a = Vector::<2>::new(1e12, 0.0));
+            Ok(())
+        },
+    )));
+    assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
+
+    assert_eq!(sim.particles(), &before);
+    assert_eq!((sim.time(), sim.steps()), (t, n));
+    assert!(sim.work.nodes.is_clear());
+    // And the simulation still steps afterwards.
+    sim.set_body_force(None);
+    sim.step(dt).unwrap();
+}
+
+/// A body force that squeezes the body along x so hard that one step maps every particle
+/// through itself (`F_xx = 1 − Δt² K < 0`): the step is refused as inverted.
+#[test]
+fn inverted_particles_are_refused() {
+    let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+    let before = sim.particles().clone();
+    let dt = sim.stable_dt(0.3).unwrap();
+    let k = 3.0 / (dt * dt);
+    sim.set_body_force(Some(Box::new(
+        move |_t: f64, _x0: &[Vector<2>], x: &[Vector<2>], a: &mut [Vector<2>]| {
+            for (a, x) in a.iter_mut().zip(x) {
+                *a = Vector::<2>::new(-k * (x[0] - 0.5), 0.0);
+            }
+            Ok(())
+        },
+    )));
+    let e = sim.step(dt).unwrap_err();
+    assert_eq!(e.kind, ErrorKind::InvertedParticle, "{e}");
+    assert_eq!(sim.particles(), &before);
+}
+
+#[test]
+fn options_are_fixed_after_the_first_step() {
+    let mut sim = block::<3>(Shape::BSpline3, Transfer::Apic);
+    let dt = sim.stable_dt(0.3).unwrap();
+    sim.step(dt).unwrap();
+    for e in [
+        sim.set_shape(Shape::Linear).unwrap_err(),
+        sim.set_transfer(Transfer::Apic).unwrap_err(),
+        sim.set_scheme(Scheme::Musl).unwrap_err(),
+    ] {
+        assert_eq!(e.kind, ErrorKind::InvalidState);
+    }
+    // Gravity and walls may change between steps.
+    sim.set_gravity([0.0, 0.0, -9.81]).unwrap();
+    sim.set_boundary(2, Side::Low, Boundary::Slip).unwrap();
+    sim.step(dt).unwrap();
+}
+
+#[test]
+fn add_particles_is_all_or_nothing() {
+    let mut sim = Sim::<2>::new([0.0, 0.0], [4, 4], 0.25).unwrap();
+    let m = sim.add_material(Material::linear_elastic(1.0, 1.0, 0.2).unwrap());
+    let good = Vector::<2>::new(0.5, 0.5);
+    let cases: [(u32, Vec<Vector<2>>, Vec<f64>, ErrorKind); 4] = [
+        (7, vec![good], vec![0.1], ErrorKind::UnknownMaterial),
+        (
+            m,
+            vec![good, Vector::<2>::new(1.5, 0.5)],
+            vec![0.1, 0.1],
+            ErrorKind::OutsideGrid,
+        ),
+        (
+            m,
+            vec![good, Vector::<2>::new(f64::NAN, 0.5)],
+            vec![0.1, 0.1],
+            ErrorKind::InvalidArgument,
+        ),
+        (
+            m,
+            vec![good, good],
+            vec![0.1, 0.0],
+            ErrorKind::InvalidArgument,
+        ),
+    ];
+    for (mat, x, vol, kind) in cases {
+        assert_eq!(
+            sim.add_particles(mat, &x, &vol, None).unwrap_err().kind,
+            kind
+        );
+        assert_eq!(sim.particles().len(), 0);
+    }
+    sim.add_particles(m, &[good], &[0.1], None).unwrap();
+    assert_eq!(sim.particles().len(), 1);
+    assert_eq!(sim.particles().mass[0], 0.1);
+    assert_eq!(
+        sim.particles().deformation_gradient[0],
+        Matrix::<2>::identity()
+    );
+}
