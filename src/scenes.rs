@@ -8,6 +8,31 @@ use crate::sim::{Sim, Transfer};
 use crate::Vector;
 use std::f64::consts::PI;
 
+/// Two elastic disks on a collision course (Sulsky, Chen & Schreyer 1994): the default scene of
+/// the runner. Unit square, disks of radius 0.2 at (0.25, 0.25) and (0.75, 0.75) moving toward
+/// each other at 0.1 m/s along the diagonal, neo-Hookean (E = 1000 Pa, ν = 0.3, ρ = 1000 kg/m³),
+/// `cells` cells per side, 2 particles per cell per direction, free faces, APIC, quadratic B-spline.
+pub fn colliding_disks(cells: usize) -> Result<Sim<2>> {
+    let h = 1.0 / cells as f64;
+    let mut sim = Sim::<2>::new([0.0, 0.0], [cells, cells], h)?;
+    let m = sim.add_material(Material::neo_hookean(1000.0, 1000.0, 0.3)?);
+    let q = h / 2.0;
+    for (centre, v) in [(0.25, 0.1), (0.75, -0.1)] {
+        let mut x = Vec::new();
+        for j in 0..2 * cells {
+            for i in 0..2 * cells {
+                let p = Vector::<2>::new((i as f64 + 0.5) * q, (j as f64 + 0.5) * q);
+                if (p - Vector::<2>::new(centre, centre)).norm() < 0.2 {
+                    x.push(p);
+                }
+            }
+        }
+        let vel = vec![Vector::<2>::new(v, v); x.len()];
+        sim.add_particles(m, &x, &vec![q * q; x.len()], Some(&vel))?;
+    }
+    Ok(sim)
+}
+
 /// The axial vibrating bar of METHOD.md section 6.5: length `L = 1` along x, fixed at `x = 0`,
 /// free at `x = L`, `v(x, t) = v0 cos(ωt) sin(βx)`, `β = π / (2L)`, `ω = β sqrt(E/ρ)`.
 ///

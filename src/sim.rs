@@ -340,6 +340,18 @@ impl<const D: usize> Sim<D> {
         &self.materials
     }
 
+    /// Total stored elastic energy `Σ_p V0_p W(F_p)` (per unit thickness in 2D).
+    pub fn strain_energy(&self) -> f64 {
+        let ps = &self.particles;
+        (0..ps.len())
+            .map(|p| {
+                let f = crate::material::embed3(&ps.deformation_gradient[p]);
+                ps.reference_volume[p]
+                    * self.materials[ps.material[p] as usize].strain_energy_density(&f)
+            })
+            .sum()
+    }
+
     /// Values of `field` for every particle, particle-major.
     pub fn field(&self, field: Field) -> Vec<f64> {
         let mut out = vec![0.0; field.components(D) * self.particles.len()];

@@ -56,6 +56,10 @@ impl Constitutive for LinearElastic {
         let eps = 0.5 * (f + f.transpose()) - Matrix3::identity();
         Matrix3::identity() * (self.0.lambda * eps.trace()) + eps * (2.0 * self.0.mu)
     }
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
+        let eps = 0.5 * (f + f.transpose()) - Matrix3::identity();
+        0.5 * self.0.lambda * eps.trace().powi(2) + self.0.mu * eps.norm_squared()
+    }
 }
 
 impl Constitutive for NeoHookean {
@@ -75,6 +79,11 @@ impl Constitutive for NeoHookean {
         let b = f * f.transpose();
         (b - Matrix3::identity()) * (self.0.mu / j)
             + Matrix3::identity() * (self.0.lambda * j.ln() / j)
+    }
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
+        let lnj = f.determinant().ln();
+        0.5 * self.0.mu * ((f.transpose() * f).trace() - 3.0) - self.0.mu * lnj
+            + 0.5 * self.0.lambda * lnj * lnj
     }
 }
 
@@ -118,6 +127,40 @@ mod tests {
         let s = nh.cauchy_stress(&f);
         let s_rot = nh.cauchy_stress(&(r * f));
         assert!((s_rot - r * s * r.transpose()).norm() < 1e-9 * s.norm());
+    }
+
+    /// The stress is the derivative of the energy: `J σ = (∂W/∂F) Fᵀ`, checked by central
+    /// differences (step 1e-6: truncation 1e-12, round-off 1e-10 relative).
+    #[test]
+    fn stress_is_the_derivative_of_the_energy() {
+        let f = Matrix3::new(1.1, 0.2, 0.0, -0.1, 0.95, 0.05, 0.02, 0.0, 1.05);
+        for m in [
+            Material::linear_elastic(1.0, 5.0, 0.3).unwrap(),
+            Material::neo_hookean(1.0, 5.0, 0.3).unwrap(),
+        ] {
+            let mut p = Matrix3::zeros();
+            let e = 1e-6;
+            for i in 0..3 {
+                for j in 0..3 {
+                    let mut d = Matrix3::zeros();
+                    d[(i, j)] = e;
+                    p[(i, j)] = (m.strain_energy_density(&(f + d))
+                        - m.strain_energy_density(&(f - d)))
+                        / (2.0 * e);
+                }
+            }
+            let sigma = m.cauchy_stress(&f);
+            match m {
+                // Small strain: σ = ∂W/∂ε, the symmetric part of ∂W/∂F.
+                Material::LinearElastic(_) => {
+                    assert!((0.5 * (p + p.transpose()) - sigma).norm() < 1e-8)
+                }
+                Material::NeoHookean(_) => {
+                    let j = f.determinant();
+                    assert!((p * f.transpose() / j - sigma).norm() < 1e-8, "{m:?}");
+                }
+            }
+        }
     }
 
     #[test]

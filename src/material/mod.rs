@@ -22,6 +22,8 @@ pub trait Constitutive {
     fn is_elastic(&self) -> bool;
     /// Cauchy stress for the 3×3 deformation gradient `f` (`det f > 0`).
     fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64>;
+    /// Stored elastic energy per unit reference volume at `f`.
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64;
 }
 
 /// A material of the simulation.
@@ -68,6 +70,9 @@ impl Constitutive for Material {
     }
     fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
         self.model().cauchy_stress(f)
+    }
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
+        self.model().strain_energy_density(f)
     }
 }
 
