@@ -1,0 +1,403 @@
+//! The C API called through its exported functions: status codes, the last-error message,
+//! buffer handling, and that failed calls change nothing. (The C and Fortran drivers under CTest
+//! repeat the misuse cases from C and Fortran.)
+
+use rkmpm::ffi::*;
+use std::ffi::{c_void, CStr};
+use std::ptr::{null, null_mut};
+use RkmpmStatus::*;
+
+fn last_error() -> String {
+    let n = unsafe { rkmpm_last_error_message(null_mut(), 0) };
+    let mut buf = vec![0i8; n + 1];
+    let m = unsafe { rkmpm_last_error_message(buf.as_mut_ptr(), buf.len()) };
+    assert_eq!(m, n);
+    unsafe { CStr::from_ptr(buf.as_ptr()) }
+        .to_str()
+        .unwrap()
+        .to_owned()
+}
+
+/// A 2D sim with a 4×4 block of particles, one step taken when `stepped`.
+fn sim2d(stepped: bool) -> *mut RkmpmSim {
+    let mut sim = null_mut();
+    let origin = [0.0, 0.0];
+    let cells = [10usize, 10];
+    unsafe {
+        assert_eq!(
+            rkmpm_sim_new(2, origin.as_ptr(), cells.as_ptr(), 0.1, &mut sim),
+            RKMPM_OK
+        );
+        let mut id = u32::MAX;
+        assert_eq!(
+            rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e5, 0.3, &mut id),
+            RKMPM_OK
+        );
+        assert_eq!(id, 0);
+        let mut x = Vec::new();
+        for j in 0..4 {
+            for i in 0..4 {
+                x.extend([0.4 + 0.05 * i as f64 + 0.025, 0.4 + 0.05 * j as f64 + 0.025]);
+            }
+        }
+        let vol = vec![0.0025; 16];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 0, 16, x.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_OK
+        );
+        if stepped {
+            let mut dt = 0.0;
+            assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+            assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK);
+        }
+    }
+    sim
+}
+
+fn positions(sim: *const RkmpmSim) -> Vec<f64> {
+    let mut n = 0;
+    unsafe {
+        assert_eq!(
+            rkmpm_sim_field_len(sim, RKMPM_FIELD_POSITION, &mut n),
+            RKMPM_OK
+        );
+        let mut out = vec![0.0; n];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_POSITION, out.as_mut_ptr(), n),
+            RKMPM_OK
+        );
+        out
+    }
+}
+
+#[test]
+fn version_abi_and_status_strings() {
+    let v = unsafe { CStr::from_ptr(rkmpm_version()) }.to_str().unwrap();
+    assert_eq!(v, env!("CARGO_PKG_VERSION"));
+    assert_eq!(rkmpm_abi_version(), RKMPM_ABI_VERSION);
+    let mut seen = std::collections::HashSet::new();
+    for s in RkmpmStatus::ALL {
+        let text = unsafe { CStr::from_ptr(rkmpm_status_str(s as i32)) }
+            .to_str()
+            .unwrap();
+        assert!(seen.insert(text.to_owned()), "duplicate status text {text}");
+    }
+    assert_eq!(seen.len(), 14);
+    let unknown = unsafe { CStr::from_ptr(rkmpm_status_str(99)) }
+        .to_str()
+        .unwrap();
+    assert_eq!(unknown, "unknown status");
+}
+
+#[test]
+fn every_error_status_is_reachable_and_changes_nothing() {
+    unsafe {
+        // 1: NULL pointers.
+        assert_eq!(
+            rkmpm_sim_new(2, null(), null(), 0.1, null_mut()),
+            RKMPM_ERR_NULL_POINTER
+        );
+        assert!(last_error().contains("out is NULL"), "{}", last_error());
+        assert_eq!(rkmpm_sim_step(null_mut(), 0.1), RKMPM_ERR_NULL_POINTER);
+        let mut out = null_mut();
+        assert_eq!(
+            rkmpm_sim_new(2, null(), [1usize, 1].as_ptr(), 0.1, &mut out),
+            RKMPM_ERR_NULL_POINTER
+        );
+        assert!(out.is_null());
+
+        // 2: invalid arguments.
+        let origin = [0.0; 3];
+        let cells = [4usize; 3];
+        assert_eq!(
+            rkmpm_sim_new(4, origin.as_ptr(), cells.as_ptr(), 0.1, &mut out),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_new(3, origin.as_ptr(), cells.as_ptr(), -0.1, &mut out),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_new(3, origin.as_ptr(), [4usize, 0, 4].as_ptr(), 0.1, &mut out),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(out.is_null());
+
+        let sim = sim2d(false);
+        let x0 = positions(sim);
+        assert_eq!(
+            rkmpm_sim_set_gravity(sim, [f64::NAN, 0.0].as_ptr()),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_shape(sim, 77, 0, 0.0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_integration(sim, 9, 0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_transfer(sim, RKMPM_TRANSFER_PIC_FLIP, 1.5),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(rkmpm_sim_set_scheme(sim, 2), RKMPM_ERR_INVALID_ARGUMENT);
+        assert_eq!(
+            rkmpm_sim_set_boundary(sim, 0, 0, RKMPM_BOUNDARY_FIXED, 0.0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_boundary(sim, 2, 1, RKMPM_BOUNDARY_FIXED, 0.0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_boundary(sim, 0, 1, 9, 0.0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_boundary(sim, 0, 1, RKMPM_BOUNDARY_FRICTION, -1.0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let mut id = 0;
+        assert_eq!(
+            rkmpm_sim_add_material_linear_elastic(sim, 1.0, 1.0, 0.5, &mut id),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(last_error().contains("poisson"), "{}", last_error());
+        let mut dt = 0.0;
+        assert_eq!(
+            rkmpm_sim_stable_dt(sim, 0.0, &mut dt),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_step(sim, f64::INFINITY),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let mut n = 0;
+        assert_eq!(
+            rkmpm_sim_field_len(sim, 77, &mut n),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let bad = [0.5, 0.5, 0.5, f64::NAN];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 0, 2, bad.as_ptr(), [1e-3, 1e-3].as_ptr(), null()),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 0, usize::MAX, bad.as_ptr(), bad.as_ptr(), null()),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+
+        // 3: a short buffer writes nothing and says how much is needed.
+        let mut buf = vec![-7.0; 10];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_STRESS, buf.as_mut_ptr(), 10),
+            RKMPM_ERR_BUFFER_TOO_SMALL
+        );
+        assert!(buf.iter().all(|&v| v == -7.0));
+        assert!(last_error().contains("needs 64"), "{}", last_error());
+
+        // 5: unknown material; 6: outside the grid. Nothing added.
+        let x = [0.5, 0.5, 0.6, 0.6];
+        let vol = [1e-3, 1e-3];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 3, 2, x.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_ERR_UNKNOWN_MATERIAL
+        );
+        let outside = [0.5, 0.5, 1.6, 0.6];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 0, 2, outside.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_ERR_OUTSIDE_GRID
+        );
+        assert_eq!(rkmpm_sim_particle_count(sim), 16);
+
+        // 12: not in this version.
+        assert_eq!(
+            rkmpm_sim_set_shape(sim, RKMPM_SHAPE_RK, 1, 2.0),
+            RKMPM_ERR_UNSUPPORTED
+        );
+        assert_eq!(
+            rkmpm_sim_set_integration(sim, RKMPM_INTEGRATION_VC, 1),
+            RKMPM_ERR_UNSUPPORTED
+        );
+
+        // 7: dt far above the stable limit.
+        assert_eq!(rkmpm_sim_stable_dt(sim, 1.0, &mut dt), RKMPM_OK);
+        assert_eq!(rkmpm_sim_step(sim, 10.0 * dt), RKMPM_ERR_UNSTABLE_TIME_STEP);
+
+        // 10: the callback fails; 8: it drives the step to non-finite values;
+        // 9: it squeezes particles through themselves.
+        extern "C" fn failing(
+            _: *mut c_void,
+            _: f64,
+            _: usize,
+            _: u32,
+            _: *const f64,
+            _: *const f64,
+            _: *mut f64,
+        ) -> i32 {
+            1
+        }
+        extern "C" fn tearing(
+            _: *mut c_void,
+            _: f64,
+            n: usize,
+            d: u32,
+            _: *const f64,
+            x: *const f64,
+            a: *mut f64,
+        ) -> i32 {
+            for p in 0..n {
+                unsafe {
+                    let xp = *x.add(p * d as usize);
+                    *a.add(p * d as usize) = if xp < 0.5 { -1e308 } else { 1e308 };
+                    *a.add(p * d as usize + 1) = 0.0;
+                }
+            }
+            0
+        }
+        extern "C" fn squeezing(
+            user: *mut c_void,
+            _: f64,
+            n: usize,
+            d: u32,
+            _: *const f64,
+            x: *const f64,
+            a: *mut f64,
+        ) -> i32 {
+            let k = unsafe { *(user as *const f64) };
+            for p in 0..n {
+                unsafe {
+                    *a.add(p * d as usize) = -k * (*x.add(p * d as usize) - 0.5);
+                    *a.add(p * d as usize + 1) = 0.0;
+                }
+            }
+            0
+        }
+        let step_dt = 0.3 * dt;
+        assert_eq!(
+            rkmpm_sim_set_body_force(sim, Some(failing), null_mut()),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(sim, step_dt), RKMPM_ERR_CALLBACK);
+        assert!(last_error().contains("returned 1"), "{}", last_error());
+        assert_eq!(
+            rkmpm_sim_set_body_force(sim, Some(tearing), null_mut()),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(sim, step_dt), RKMPM_ERR_NON_FINITE);
+        let mut k = 3.0 / (step_dt * step_dt);
+        assert_eq!(
+            rkmpm_sim_set_body_force(sim, Some(squeezing), (&mut k as *mut f64).cast()),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(sim, step_dt), RKMPM_ERR_INVERTED_PARTICLE);
+        assert!(last_error().contains("inverted"), "{}", last_error());
+        assert_eq!(rkmpm_sim_set_body_force(sim, None, null_mut()), RKMPM_OK);
+
+        // 11: a file that cannot be written.
+        let path = c"/nonexistent-dir/x.vtu";
+        assert_eq!(rkmpm_sim_write_vtk(sim, path.as_ptr()), RKMPM_ERR_IO);
+
+        // Nothing above changed the particles, the time or the step count.
+        assert_eq!(positions(sim), x0);
+        let (mut t, mut steps) = (-1.0, 99);
+        assert_eq!(rkmpm_sim_time(sim, &mut t), RKMPM_OK);
+        assert_eq!(rkmpm_sim_step_count(sim, &mut steps), RKMPM_OK);
+        assert_eq!((t, steps), (0.0, 0));
+
+        // 4: options after the first step.
+        assert_eq!(rkmpm_sim_step(sim, step_dt), RKMPM_OK);
+        assert_eq!(
+            rkmpm_sim_set_shape(sim, RKMPM_SHAPE_LINEAR, 0, 0.0),
+            RKMPM_ERR_INVALID_STATE
+        );
+        assert!(
+            last_error().contains("before the first step"),
+            "{}",
+            last_error()
+        );
+        rkmpm_sim_free(sim);
+        rkmpm_sim_free(null_mut());
+    }
+}
+
+#[test]
+fn last_error_message_truncates_with_a_nul_and_reports_the_full_length() {
+    unsafe {
+        assert_eq!(rkmpm_sim_step(null_mut(), 0.1), RKMPM_ERR_NULL_POINTER);
+        let full = last_error();
+        assert_eq!(full, "rkmpm_sim_step: sim is NULL");
+        let mut small = [1i8; 5];
+        let n = rkmpm_last_error_message(small.as_mut_ptr(), small.len());
+        assert_eq!(n, full.len());
+        assert_eq!(CStr::from_ptr(small.as_ptr()).to_str().unwrap(), &full[..4]);
+    }
+}
+
+#[test]
+fn fields_have_their_documented_layout() {
+    let sim = sim2d(true);
+    unsafe {
+        let mut dim = 0;
+        assert_eq!(rkmpm_sim_dim(sim, &mut dim), RKMPM_OK);
+        assert_eq!(dim, 2);
+        for (field, per) in [
+            (RKMPM_FIELD_POSITION, 2),
+            (RKMPM_FIELD_VELOCITY, 2),
+            (RKMPM_FIELD_DISPLACEMENT, 2),
+            (RKMPM_FIELD_STRESS, 4),
+            (RKMPM_FIELD_PRESSURE, 1),
+            (RKMPM_FIELD_VOLUME, 1),
+            (RKMPM_FIELD_MASS, 1),
+            (RKMPM_FIELD_REFERENCE_POSITION, 2),
+            (RKMPM_FIELD_DEFORMATION_GRADIENT, 4),
+        ] {
+            let mut n = 0;
+            assert_eq!(rkmpm_sim_field_len(sim, field, &mut n), RKMPM_OK);
+            assert_eq!(n, 16 * per);
+        }
+        let mut mass = vec![0.0; 16];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_MASS, mass.as_mut_ptr(), 16),
+            RKMPM_OK
+        );
+        assert!(mass.iter().all(|&m| (m - 2.5).abs() < 1e-12));
+        let mut s = vec![0.0; 64];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_STRESS, s.as_mut_ptr(), 64),
+            RKMPM_OK
+        );
+        for p in 0..16 {
+            assert_eq!(s[4 * p + 1], s[4 * p + 2], "stress is symmetric");
+        }
+        rkmpm_sim_free(sim);
+    }
+}
+
+/// Separate simulations on separate threads at once give the same results as one after another.
+#[test]
+fn separate_simulations_run_on_separate_threads() {
+    struct Handle(*mut RkmpmSim);
+    unsafe impl Send for Handle {}
+    let run = |h: Handle| unsafe {
+        let mut dt = 0.0;
+        assert_eq!(rkmpm_sim_stable_dt(h.0, 0.3, &mut dt), RKMPM_OK);
+        for _ in 0..20 {
+            assert_eq!(rkmpm_sim_step(h.0, dt), RKMPM_OK);
+        }
+        let x = positions(h.0);
+        rkmpm_sim_free(h.0);
+        x
+    };
+    let serial = run(Handle(sim2d(false)));
+    let handles: Vec<_> = (0..4)
+        .map(|_| {
+            let h = Handle(sim2d(false));
+            std::thread::spawn(move || run(h))
+        })
+        .collect();
+    for h in handles {
+        assert_eq!(h.join().unwrap(), serial);
+    }
+}
