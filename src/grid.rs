@@ -100,8 +100,8 @@ impl<const D: usize> Grid<D> {
     #[inline]
     pub fn node_index(&self, i: [i64; D]) -> usize {
         let mut n = 0usize;
-        for a in 0..D {
-            let s = i[a] + self.ghost as i64;
+        for (a, &ia) in i.iter().enumerate() {
+            let s = ia + self.ghost as i64;
             debug_assert!(s >= 0 && (s as usize) < self.dims[a], "node outside grid");
             n += s as usize * self.strides[a];
         }

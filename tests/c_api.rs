@@ -40,7 +40,7 @@ fn sim2d(stepped: bool) -> *mut RkmpmSim {
                 x.extend([0.4 + 0.05 * i as f64 + 0.025, 0.4 + 0.05 * j as f64 + 0.025]);
             }
         }
-        let vol = vec![0.0025; 16];
+        let vol = [0.0025; 16];
         assert_eq!(
             rkmpm_sim_add_particles(sim, 0, 16, x.as_ptr(), vol.as_ptr(), null()),
             RKMPM_OK

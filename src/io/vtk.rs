@@ -19,9 +19,9 @@ fn write_atomically(path: &Path, text: &str) -> Result<()> {
 }
 
 fn data_array(out: &mut String, name: &str, components: usize, values: impl Iterator<Item = f64>) {
-    let _ = write!(
+    let _ = writeln!(
         out,
-        "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"ascii\">\n"
+        "<DataArray type=\"Float64\" Name=\"{name}\" NumberOfComponents=\"{components}\" format=\"ascii\">"
     );
     for (i, v) in values.enumerate() {
         let _ = write!(out, "{v:e}");
