@@ -176,6 +176,14 @@ impl<const D: usize> Sim<D> {
             }
         }
         self.options.transfer = transfer;
+        // APIC matrices exist only under APIC.
+        match transfer {
+            Transfer::Apic => self
+                .particles
+                .affine
+                .resize(self.particles.len(), Matrix::<D>::zeros()),
+            Transfer::PicFlip { .. } => self.particles.affine = Vec::new(),
+        }
         Ok(())
     }
 
@@ -273,7 +281,7 @@ impl<const D: usize> Sim<D> {
         }
         let rho = mat.density();
         let ps = &mut self.particles;
-        let apic = matches!(self.options.transfer, Transfer::Apic) || !ps.affine.is_empty();
+        let apic = matches!(self.options.transfer, Transfer::Apic);
         ps.position.extend_from_slice(positions);
         ps.reference_position.extend_from_slice(positions);
         match velocities {

@@ -151,3 +151,61 @@ impl VtkSeries {
         Ok(path)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenes::VibratingBar;
+
+    /// The numbers in a named `DataArray` of a `.vtu` text.
+    fn array(text: &str, name: &str) -> Vec<f64> {
+        let start = text.find(&format!("Name=\"{name}\"")).expect(name);
+        let body = &text[start..];
+        let open = body.find('>').unwrap() + 1;
+        let close = body.find("</DataArray>").unwrap();
+        body[open..close]
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn series_writes_frames_and_collection_with_the_particle_data() {
+        let dir = std::env::temp_dir().join(format!("rkmpm-vtk-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut sim = VibratingBar::default().build::<2>().unwrap();
+        let mut series = VtkSeries::new(dir.join("bar"));
+        series.write_frame(&sim).unwrap();
+        let dt = sim.stable_dt(0.2).unwrap();
+        sim.step(dt).unwrap();
+        let second = series.write_frame(&sim).unwrap();
+        assert_eq!(second, dir.join("bar_00001.vtu"));
+
+        let pvd = std::fs::read_to_string(dir.join("bar.pvd")).unwrap();
+        assert_eq!(pvd.matches("<DataSet ").count(), 2);
+        assert!(pvd.contains("file=\"bar_00000.vtu\"") && pvd.contains("file=\"bar_00001.vtu\""));
+        assert!(pvd.contains(&format!("timestep=\"{:e}\"", sim.time())));
+
+        let vtu = std::fs::read_to_string(&second).unwrap();
+        let n = sim.particles().len();
+        assert!(vtu.contains(&format!("NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\"")));
+        // Values round-trip exactly: `{:e}` prints the shortest representation that parses back.
+        let points = array(&vtu, "position");
+        let velocity = array(&vtu, "velocity");
+        let stress = array(&vtu, "stress");
+        let ps = sim.particles();
+        for p in 0..n {
+            assert_eq!(&points[3 * p..3 * p + 2], ps.position[p].as_slice());
+            assert_eq!(points[3 * p + 2], 0.0);
+            assert_eq!(&velocity[3 * p..3 * p + 2], ps.velocity[p].as_slice());
+            assert_eq!(stress[9 * p], ps.stress[p][(0, 0)]);
+            assert_eq!(stress[9 * p + 1], ps.stress[p][(0, 1)]);
+            assert_eq!(stress[9 * p + 8], 0.0);
+        }
+        assert_eq!(array(&vtu, "mass"), ps.mass);
+        assert_eq!(array(&vtu, "types").len(), n);
+        assert_eq!(array(&vtu, "offsets").last().copied(), Some(n as f64));
+        assert!(!dir.join("bar_00001.vtu.tmp").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

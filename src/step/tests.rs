@@ -90,6 +90,12 @@ fn step_conserves_mass_and_linear_momentum() {
                 let m1: f64 = sim.particles().mass.iter().sum();
                 assert_eq!(m0, m1);
                 assert!(sim.work.nodes.is_clear(), "grid not reset");
+                // No APIC matrices unless APIC runs.
+                let apic = matches!(transfer, Transfer::Apic);
+                assert_eq!(
+                    sim.particles().affine.len(),
+                    if apic { sim.particles().len() } else { 0 }
+                );
             }
         }
     }
