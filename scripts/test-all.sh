@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Every test of rkmpm: the Rust unit, integration and doc tests (the header check among them),
+# then the C and Fortran drivers built by CMake and run under CTest.
+# Installs gfortran and cmake with apt-get when they are missing (as root; otherwise says how).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+missing=()
+command -v gfortran >/dev/null || missing+=(gfortran)
+command -v cmake >/dev/null || missing+=(cmake)
+command -v cc >/dev/null || missing+=(gcc)
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "== installing ${missing[*]}"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  else
+    echo "missing: ${missing[*]}; install them (e.g. sudo apt-get install ${missing[*]}) and run again" >&2
+    exit 1
+  fi
+fi
+
+export RUST_BACKTRACE=0
+echo "== Rust tests (cargo test --release)"
+cargo test --release
+
+echo "== C and Fortran drivers (CMake + CTest)"
+build=build/examples
+cmake -S examples -B "$build" -DCMAKE_BUILD_TYPE=Release -DRKMPM_CARGO_TARGET_DIR="$PWD/target" >/dev/null
+cmake --build "$build" -j 2
+ctest --test-dir "$build" --output-on-failure
