@@ -30,6 +30,12 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
+ * Largest accepted condition number of the moment matrix (normalized by `a`, so O(1)–O(1e4) for
+ * sensible supports; a support too small for the order drives it to infinity).
+ */
+#define MAX_CONDITION 1e10
+
+/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -158,7 +164,8 @@ typedef uint32_t RkmpmField;
 #define RKMPM_SHAPE_BSPLINE3 2
 
 /**
- * Reproducing kernel of order `rk_order`, normalized support `rk_support` (not yet in this version).
+ * Reproducing kernel of basis order `rk_order` (1..5) with normalized support `rk_support` (kernel
+ * support in cells; about 2 for order 1, 3 for order 2, 3.5 for order 3). Not with APIC for order >= 2.
  */
 #define RKMPM_SHAPE_RK 3
 
@@ -323,7 +330,8 @@ enum RkmpmStatus rkmpm_sim_dim(const struct RkmpmSim *sim, uint32_t *out_dim);
 
 /**
  * Chooses the shape function (before the first step). `rk_order` and `rk_support` are read
- * only for `RKMPM_SHAPE_RK`.
+ * only for `RKMPM_SHAPE_RK`; a support whose moment matrix is singular or badly conditioned for
+ * the order is refused with `RKMPM_ERR_INVALID_ARGUMENT`.
  *
  * # Safety
  * `sim` must be a live handle.

@@ -36,7 +36,8 @@ pub const RKMPM_SHAPE_LINEAR: RkmpmShape = 0;
 pub const RKMPM_SHAPE_BSPLINE2: RkmpmShape = 1;
 /// Cubic B-spline.
 pub const RKMPM_SHAPE_BSPLINE3: RkmpmShape = 2;
-/// Reproducing kernel of order `rk_order`, normalized support `rk_support` (not yet in this version).
+/// Reproducing kernel of basis order `rk_order` (1..5) with normalized support `rk_support` (kernel
+/// support in cells; about 2 for order 1, 3 for order 2, 3.5 for order 3). Not with APIC for order >= 2.
 pub const RKMPM_SHAPE_RK: RkmpmShape = 3;
 
 /// Integration of the weak form (`rkmpm_sim_set_integration`).
@@ -284,7 +285,8 @@ pub unsafe extern "C" fn rkmpm_sim_dim(sim: *const RkmpmSim, out_dim: *mut u32) 
 }
 
 /// Chooses the shape function (before the first step). `rk_order` and `rk_support` are read
-/// only for `RKMPM_SHAPE_RK`.
+/// only for `RKMPM_SHAPE_RK`; a support whose moment matrix is singular or badly conditioned for
+/// the order is refused with `RKMPM_ERR_INVALID_ARGUMENT`.
 ///
 /// # Safety
 /// `sim` must be a live handle.

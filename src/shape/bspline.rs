@@ -105,6 +105,10 @@ impl<const D: usize> ShapeFunction<D> for BSpline {
         }
     }
 
+    fn reproduction_order(&self) -> u32 {
+        1
+    }
+
     fn evaluate(
         &self,
         grid: &Grid<D>,

@@ -6,10 +6,12 @@
 //! implementing [`ShapeFunction`] and nothing in the step changes.
 
 mod bspline;
+mod rk;
 
 pub use bspline::{BSpline, BSplineOrder};
+pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::Result;
 use crate::grid::Grid;
 use crate::Vector;
 use rayon::prelude::*;
@@ -23,7 +25,9 @@ pub enum Shape {
     BSpline2,
     /// Cubic B-spline (C2).
     BSpline3,
-    /// Reproducing kernel of basis order `order` with normalized support `support` (lands with the RK issue).
+    /// Reproducing kernel of basis order `order` with normalized support `support` (`ã`, the
+    /// kernel support in cells): about 2 for order 1 (where it equals the cubic B-spline), 3 for
+    /// order 2, 3.5 to 4 for order 3.
     Rk { order: u32, support: f64 },
 }
 
@@ -34,10 +38,9 @@ impl Shape {
             Shape::Linear => Ok(Box::new(BSpline::new(BSplineOrder::Linear))),
             Shape::BSpline2 => Ok(Box::new(BSpline::new(BSplineOrder::Quadratic))),
             Shape::BSpline3 => Ok(Box::new(BSpline::new(BSplineOrder::Cubic))),
-            Shape::Rk { .. } => Err(Error::new(
-                ErrorKind::Unsupported,
-                "RK shape functions are not in this build yet (issue 3: reproducing kernel shape functions)",
-            )),
+            Shape::Rk { order, support } => {
+                Ok(Box::new(ReproducingKernel::<D>::new(order, support)?))
+            }
         }
     }
 }
@@ -52,6 +55,8 @@ pub trait ShapeFunction<const D: usize>: Send + Sync {
     /// `D_p = Σ_I Ψ_I (x_I − x_p)(x_I − x_p)ᵀ` when it is the same multiple of the identity for every
     /// `x_p` (B-splines of order ≥ 2); `None` otherwise (APIC then uses `Σ_I v_I ⊗ ∇Ψ_I`).
     fn apic_inertia(&self, cell_size: f64) -> Option<f64>;
+    /// Polynomial degree the shape function reproduces.
+    fn reproduction_order(&self) -> u32;
     /// Fills `nodes`, `values` and `gradients` (each `stencil_len()` long) for a point `x` inside
     /// the domain of `grid`.
     fn evaluate(

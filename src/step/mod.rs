@@ -73,13 +73,29 @@ impl<const D: usize> Sim<D> {
                 ),
             ));
         }
-        self.options.walls.check_fits(&self.grid)?;
+        self.check_options()?;
         let result = self.advance(dt);
         self.work.nodes.reset();
         let updates = result?;
         self.commit(updates);
         self.time += dt;
         self.steps += 1;
+        Ok(())
+    }
+
+    /// Refuses combinations of options that cannot run.
+    fn check_options(&self) -> Result<()> {
+        self.options.walls.check_fits(&self.grid)?;
+        if matches!(self.options.transfer, Transfer::Apic) && self.shape.reproduction_order() >= 2 {
+            // D_p = Σ Ψ (x_I − x_p)(x_I − x_p)ᵀ vanishes for shape functions that reproduce
+            // quadratics, and replacing it by the velocity gradient amplifies the round trip
+            // (METHOD.md section 7).
+            return Err(Error::new(
+                ErrorKind::Unsupported,
+                "APIC with a shape function that reproduces quadratics (RK order >= 2) is unstable; \
+                 use RKMPM_TRANSFER_PIC_FLIP",
+            ));
+        }
         Ok(())
     }
 
