@@ -78,7 +78,7 @@ impl<const D: usize> ReproducingKernel<D> {
             width: (2.0 * support).ceil() as usize + 1,
         };
         let worst = rk.worst_condition();
-        if !(worst <= MAX_CONDITION) {
+        if worst.is_nan() || worst > MAX_CONDITION {
             return Err(Error::invalid(format!(
                 "rk_support {support} is too small for rk_order {order}: the moment matrix has condition number {worst:.3e} (limit {MAX_CONDITION:.0e}); try ã ≥ {:.1}",
                 (order as f64 + 1.0) / 2.0 + 0.5
