@@ -143,6 +143,8 @@ pub struct GridNodes<const D: usize> {
     /// Velocity after the grid update and boundary conditions.
     pub velocity: Vec<Vector<D>>,
     touched: Vec<bool>,
+    /// Position of each touched node in `active` (valid only for touched nodes).
+    slot: Vec<u32>,
     /// Storage indices of the touched nodes, in the order they were first touched.
     pub active: Vec<usize>,
 }
@@ -157,16 +159,26 @@ impl<const D: usize> GridNodes<D> {
         self.velocity_old = vec![Vector::zeros(); n];
         self.velocity = vec![Vector::zeros(); n];
         self.touched = vec![false; n];
+        self.slot = vec![0; n];
         self.active.clear();
     }
 
-    /// Marks node `n` as written this step.
+    /// Marks node `n` as written this step and returns its position in `active`.
     #[inline]
-    pub fn touch(&mut self, n: usize) {
+    pub fn touch(&mut self, n: usize) -> usize {
         if !self.touched[n] {
             self.touched[n] = true;
+            self.slot[n] = self.active.len() as u32;
             self.active.push(n);
         }
+        self.slot[n] as usize
+    }
+
+    /// Position of touched node `n` in `active`.
+    #[inline]
+    pub fn slot(&self, n: usize) -> usize {
+        debug_assert!(self.touched[n]);
+        self.slot[n] as usize
     }
 
     /// Zeroes the nodes written this step, and only those.

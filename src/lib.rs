@@ -25,6 +25,7 @@ pub mod boundary;
 pub mod error;
 pub mod ffi;
 pub mod grid;
+pub mod integration;
 pub mod io;
 pub mod material;
 pub mod particles;

@@ -3,6 +3,7 @@
 use crate::boundary::{Boundary, Side, Walls};
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
+use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
 use crate::particles::{Field, Particles};
 use crate::shape::{Shape, ShapeFunction};
@@ -91,6 +92,8 @@ pub struct Sim<const D: usize> {
     pub(crate) materials: Vec<Material>,
     pub(crate) particles: Particles<D>,
     pub(crate) body_force: Option<Box<dyn BodyForce<D>>>,
+    pub(crate) boundary: BoundaryPoints<D>,
+    pub(crate) vc: Option<VcCorrection<D>>,
     pub(crate) time: f64,
     pub(crate) steps: u64,
     pub(crate) work: Workspace<D>,
@@ -121,6 +124,8 @@ impl<const D: usize> Sim<D> {
             materials: Vec::new(),
             particles: Particles::default(),
             body_force: None,
+            boundary: BoundaryPoints::default(),
+            vc: None,
             time: 0.0,
             steps: 0,
             work: Workspace::default(),
@@ -153,16 +158,12 @@ impl<const D: usize> Sim<D> {
     /// Chooses the integration. Before stepping only.
     pub fn set_integration(&mut self, integration: Integration) -> Result<()> {
         self.before_stepping("the integration")?;
-        match integration {
-            Integration::MaterialPoint => {
-                self.options.integration = integration;
-                Ok(())
-            }
-            Integration::Vc { .. } => Err(Error::new(
-                ErrorKind::Unsupported,
-                "VC integration is not in this build yet (issue 3: variationally consistent integration)",
-            )),
-        }
+        self.vc = match integration {
+            Integration::MaterialPoint => None,
+            Integration::Vc { order } => Some(VcCorrection::new(order)?),
+        };
+        self.options.integration = integration;
+        Ok(())
     }
 
     /// Chooses the velocity transfer. Before stepping only.
@@ -219,6 +220,29 @@ impl<const D: usize> Sim<D> {
     /// Sets (or with `None` removes) the body-force field.
     pub fn set_body_force(&mut self, body_force: Option<Box<dyn BodyForce<D>>>) {
         self.body_force = body_force;
+    }
+
+    /// Adds boundary points (surface quadrature points for VC integration and tractions):
+    /// positions on the surface, outward normals times area (length in 2D), and tractions (force
+    /// per current area) or `None`. All or nothing. Without any, VC generates them from the
+    /// particle lattice at the first step.
+    pub fn add_boundary_points(
+        &mut self,
+        positions: &[Vector<D>],
+        area_normals: &[Vector<D>],
+        tractions: Option<&[Vector<D>]>,
+    ) -> Result<()> {
+        if let Some(p) = positions.iter().position(|x| !self.grid.contains(x)) {
+            return Err(Error::new(
+                ErrorKind::OutsideGrid,
+                format!("boundary point {p} lies outside the grid domain"),
+            ));
+        }
+        self.boundary.add(positions, area_normals, tractions)
+    }
+
+    pub fn boundary_points(&self) -> &BoundaryPoints<D> {
+        &self.boundary
     }
 
     /// Adds a material and returns its id.

@@ -211,14 +211,19 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         );
         assert_eq!(rkmpm_sim_particle_count(sim), 16);
 
-        // 12: not in this version.
+        // A support too small for the RK order.
         assert_eq!(
-            rkmpm_sim_set_shape(sim, RKMPM_SHAPE_RK, 1, 2.0),
-            RKMPM_ERR_UNSUPPORTED
+            rkmpm_sim_set_shape(sim, RKMPM_SHAPE_RK, 2, 1.25),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(
+            last_error().contains("condition number"),
+            "{}",
+            last_error()
         );
         assert_eq!(
-            rkmpm_sim_set_integration(sim, RKMPM_INTEGRATION_VC, 1),
-            RKMPM_ERR_UNSUPPORTED
+            rkmpm_sim_set_integration(sim, RKMPM_INTEGRATION_VC, 0),
+            RKMPM_ERR_INVALID_ARGUMENT
         );
 
         // 7: dt far above the stable limit.
@@ -305,6 +310,51 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         assert_eq!(rkmpm_sim_time(sim, &mut t), RKMPM_OK);
         assert_eq!(rkmpm_sim_step_count(sim, &mut steps), RKMPM_OK);
         assert_eq!((t, steps), (0.0, 0));
+
+        // 12: a combination that cannot run (APIC with RK order 2), refused at the step.
+        let other = sim2d(false);
+        assert_eq!(rkmpm_sim_set_shape(other, RKMPM_SHAPE_RK, 2, 3.0), RKMPM_OK);
+        assert_eq!(rkmpm_sim_step(other, step_dt), RKMPM_ERR_UNSUPPORTED);
+        assert_eq!(
+            rkmpm_sim_set_transfer(other, RKMPM_TRANSFER_PIC_FLIP, 0.0),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(other, step_dt), RKMPM_OK);
+        rkmpm_sim_free(other);
+
+        // Boundary points: lengths, NULL tractions, outside the grid; VC then steps.
+        let other = sim2d(false);
+        let bx = [0.4, 0.5, 0.6, 0.5];
+        let bn = [-0.2, 0.0, 0.2, 0.0];
+        assert_eq!(
+            rkmpm_sim_add_boundary_points(other, 2, bx.as_ptr(), null(), null()),
+            RKMPM_ERR_NULL_POINTER
+        );
+        assert_eq!(
+            rkmpm_sim_add_boundary_points(
+                other,
+                2,
+                [0.4, 0.5, 1.6, 0.5].as_ptr(),
+                bn.as_ptr(),
+                null()
+            ),
+            RKMPM_ERR_OUTSIDE_GRID
+        );
+        assert_eq!(
+            rkmpm_sim_add_boundary_points(other, 2, bx.as_ptr(), [0.0; 4].as_ptr(), null()),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let mut nb = 9;
+        assert_eq!(rkmpm_sim_boundary_point_count(other, &mut nb), RKMPM_OK);
+        assert_eq!(nb, 0);
+        assert_eq!(
+            rkmpm_sim_set_integration(other, RKMPM_INTEGRATION_VC, 1),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(other, step_dt), RKMPM_OK);
+        assert_eq!(rkmpm_sim_boundary_point_count(other, &mut nb), RKMPM_OK);
+        assert_eq!(nb, 16, "lattice surface of a 4×4 block");
+        rkmpm_sim_free(other);
 
         // 4: options after the first step.
         assert_eq!(rkmpm_sim_step(sim, step_dt), RKMPM_OK);

@@ -44,7 +44,9 @@ pub const RKMPM_SHAPE_RK: RkmpmShape = 3;
 pub type RkmpmIntegration = u32;
 /// Material-point integration (the default).
 pub const RKMPM_INTEGRATION_MP: RkmpmIntegration = 0;
-/// Variationally consistent integration of order `vc_order` (not yet in this version).
+/// Variationally consistent integration of order `vc_order` (1..4): test-function gradients
+/// corrected so the divergence equality of that order holds (needs boundary points; without any,
+/// they are generated from the particle lattice at the first step).
 pub const RKMPM_INTEGRATION_VC: RkmpmIntegration = 1;
 
 /// Particle-grid velocity transfer (`rkmpm_sim_set_transfer`).
@@ -314,7 +316,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_shape(
     })
 }
 
-/// Chooses the integration (before the first step).
+/// Chooses the integration (before the first step); `vc_order` (1..4) is read only for
+/// `RKMPM_INTEGRATION_VC`.
 ///
 /// # Safety
 /// `sim` must be a live handle.
@@ -576,6 +579,66 @@ unsafe fn add_particles<const D: usize>(
     };
     m.add_particles(material, &x, vol, v.as_deref())?;
     Ok(())
+}
+
+/// Adds `count` boundary points: `positions` (`count * dim`, on the material's surface, inside the
+/// grid), `area_normals` (`count * dim`, outward normal times area; length in 2D; non-zero) and
+/// `tractions` (`count * dim`, force per current area, or NULL for none). They move with the grid,
+/// update their normals by Nanson's formula, carry the tractions and close VC integration's
+/// divergence equality. All or nothing.
+///
+/// # Safety
+/// `sim` must be a live handle; the arrays must hold the stated number of values.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_boundary_points(
+    sim: *mut RkmpmSim,
+    count: usize,
+    positions: *const f64,
+    area_normals: *const f64,
+    tractions: *const f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_add_boundary_points", || {
+        let s = sim_mut(sim)?;
+        with_sim!(&mut s.sim, m => add_boundary_points(m, count, positions, area_normals, tractions))
+    })
+}
+
+unsafe fn add_boundary_points<const D: usize>(
+    m: &mut Sim<D>,
+    count: usize,
+    positions: *const f64,
+    area_normals: *const f64,
+    tractions: *const f64,
+) -> Result<(), Failure> {
+    let n = checked_len("count", count, D)?;
+    let x = vectors::<D>(slice("positions", positions, n)?);
+    let na = vectors::<D>(slice("area_normals", area_normals, n)?);
+    let t = if tractions.is_null() {
+        None
+    } else {
+        Some(vectors::<D>(slice("tractions", tractions, n)?))
+    };
+    m.add_boundary_points(&x, &na, t.as_deref())?;
+    Ok(())
+}
+
+/// Writes to `*out_count` the number of boundary points.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_count` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_boundary_point_count(
+    sim: *const RkmpmSim,
+    out_count: *mut usize,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_boundary_point_count", || {
+        let s = sim_ref(sim)?;
+        write_out(
+            "out_count",
+            out_count,
+            with_sim!(&s.sim, m => m.boundary_points().len()),
+        )
+    })
 }
 
 /// Writes `cfl · h / max_p(c_p + |v_p|)` to `*out_dt`; `cfl` in (0, 1] (0.2 to 0.5 is usual).

@@ -31,7 +31,7 @@ pub enum RkmpmStatus {
     RKMPM_ERR_CALLBACK = 10,
     /// A file could not be written or read.
     RKMPM_ERR_IO = 11,
-    /// The feature is not available in this version.
+    /// The feature or combination of options is not available (for example APIC with RK order >= 2).
     RKMPM_ERR_UNSUPPORTED = 12,
     /// An internal error (a caught panic); please report it.
     RKMPM_ERR_PANIC = 13,
@@ -70,7 +70,7 @@ impl RkmpmStatus {
             RkmpmStatus::RKMPM_ERR_INVERTED_PARTICLE => "inverted particle (det F <= 0)\0",
             RkmpmStatus::RKMPM_ERR_CALLBACK => "callback failed\0",
             RkmpmStatus::RKMPM_ERR_IO => "input/output error\0",
-            RkmpmStatus::RKMPM_ERR_UNSUPPORTED => "not supported in this version\0",
+            RkmpmStatus::RKMPM_ERR_UNSUPPORTED => "not supported\0",
             RkmpmStatus::RKMPM_ERR_PANIC => "internal error (panic)\0",
         }
     }

@@ -108,4 +108,4 @@ impl<const D: usize> Stencils<D> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

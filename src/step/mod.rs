@@ -21,6 +21,7 @@ pub use particle_to_grid::particle_to_grid;
 
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
+use crate::integration::BoundaryPoints;
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::shape::Stencils;
 use crate::sim::{Scheme, Sim, Transfer};
@@ -31,9 +32,21 @@ use rayon::prelude::*;
 #[derive(Debug, Default)]
 pub struct Workspace<const D: usize> {
     pub stencils: Stencils<D>,
+    pub boundary_stencils: Stencils<D>,
+    /// Current particle volumes (for VC).
+    pub volumes: Vec<f64>,
+    pub boundary_updates: Vec<BoundaryUpdate<D>>,
     pub nodes: GridNodes<D>,
     pub body_acceleration: Vec<Vector<D>>,
     pub updates: Vec<ParticleUpdate<D>>,
+}
+
+/// The new state of one boundary point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundaryUpdate<const D: usize> {
+    pub position: Vector<D>,
+    pub deformation_gradient: Matrix<D>,
+    pub area_normal: Vector<D>,
 }
 
 /// What the transfer needs from the particles and the shape function.
@@ -74,6 +87,14 @@ impl<const D: usize> Sim<D> {
             ));
         }
         self.check_options()?;
+        if self.vc.is_some() && self.boundary.is_empty() && self.steps == 0 {
+            // VC needs the surface: take it from the particle lattice (documented).
+            let (x, na) = BoundaryPoints::from_lattice(
+                &self.particles.position,
+                &self.particles.reference_volume,
+            );
+            self.boundary.add(&x, &na, None)?;
+        }
         let result = self.advance(dt);
         self.work.nodes.reset();
         let updates = result?;
@@ -158,6 +179,29 @@ impl<const D: usize> Sim<D> {
             None => None,
         };
 
+        // Boundary points, only when VC or tractions need them.
+        let boundary = &self.boundary;
+        let with_boundary = self.vc.is_some() || boundary.has_tractions();
+        if with_boundary {
+            work.boundary_stencils
+                .compute(self.shape.as_ref(), grid, &boundary.position);
+        }
+
+        // VC corrections of the test-function gradients.
+        if let Some(vc) = self.vc.as_mut() {
+            work.volumes.clear();
+            work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
+            vc.compute(
+                grid,
+                &ps.position,
+                &work.volumes,
+                &work.stencils,
+                boundary,
+                &work.boundary_stencils,
+                &mut work.nodes,
+            );
+        }
+
         // 3. Particle to grid.
         let velocity = |p: usize| ps.velocity[p];
         let affine = |p: usize| ps.affine[p];
@@ -168,9 +212,12 @@ impl<const D: usize> Sim<D> {
             &velocity,
             plan.apic
                 .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
-            Some((self.options.gravity, body)),
+            Some((self.options.gravity, body, self.vc.as_ref())),
             &mut work.nodes,
         );
+        if boundary.has_tractions() {
+            apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
+        }
 
         // 4. Grid update with the wall conditions.
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
@@ -223,6 +270,35 @@ impl<const D: usize> Sim<D> {
             });
         }
 
+        // Boundary points move with the grid like massless particles; Nanson for n a.
+        let mut boundary_updates = std::mem::take(&mut work.boundary_updates);
+        boundary_updates.clear();
+        if with_boundary {
+            let nodes = &work.nodes;
+            let bs = &work.boundary_stencils;
+            boundary_updates.extend((0..boundary.len()).map(|b| {
+                let (ns, ws, _) = bs.of(b);
+                let v: Vector<D> = ns
+                    .iter()
+                    .zip(ws)
+                    .map(|(&n, &w)| w * nodes.velocity[n])
+                    .sum();
+                let f = (Matrix::<D>::identity() + dt * velocity_gradient(bs, nodes, b))
+                    * boundary.deformation_gradient[b];
+                let j = crate::determinant(&f);
+                let area_normal = f
+                    .try_inverse()
+                    .map_or(Vector::from_element(f64::NAN), |fi| {
+                        j * fi.transpose() * boundary.reference_area_normal[b]
+                    });
+                BoundaryUpdate {
+                    position: boundary.position[b] + dt * v,
+                    deformation_gradient: f,
+                    area_normal,
+                }
+            }));
+        }
+
         // 6. Constitutive update.
         let materials = &self.materials;
         updates.par_iter_mut().enumerate().for_each(|(p, u)| {
@@ -247,8 +323,27 @@ impl<const D: usize> Sim<D> {
                 self.time
             );
             work.updates = updates;
+            work.boundary_updates = boundary_updates;
             return Err(Error::new(kind, message));
         }
+        if let Some(b) = boundary_updates.iter().position(|u| {
+            !(u.position
+                .iter()
+                .chain(u.area_normal.iter())
+                .all(|c| c.is_finite())
+                && crate::determinant(&u.deformation_gradient) > 0.0
+                && grid.contains(&u.position))
+        }) {
+            let message = format!(
+                "step {} (t = {:e}, dt = {dt:e}) rejected: boundary point {b} is inverted, not finite or outside the grid",
+                self.steps + 1,
+                self.time
+            );
+            work.updates = updates;
+            work.boundary_updates = boundary_updates;
+            return Err(Error::new(ErrorKind::OutsideGrid, message));
+        }
+        work.boundary_updates = boundary_updates;
         Ok(updates)
     }
 
@@ -267,6 +362,30 @@ impl<const D: usize> Sim<D> {
             }
         }
         self.work.updates = updates;
+        let b = &mut self.boundary;
+        for (k, u) in self.work.boundary_updates.iter().enumerate() {
+            b.position[k] = u.position;
+            b.deformation_gradient[k] = u.deformation_gradient;
+            b.area_normal[k] = u.area_normal;
+        }
+    }
+}
+
+/// Adds the traction forces `Σ_b Ψ_I(x_b) t_b |n a|_b` of the boundary points.
+fn apply_tractions<const D: usize>(
+    boundary: &BoundaryPoints<D>,
+    stencils: &Stencils<D>,
+    nodes: &mut GridNodes<D>,
+) {
+    for b in 0..boundary.len() {
+        let force = boundary.traction[b] * boundary.area_normal[b].norm();
+        let (ns, ws, _) = stencils.of(b);
+        for (&n, &w) in ns.iter().zip(ws) {
+            if w != 0.0 {
+                nodes.touch(n);
+                nodes.force[n] += w * force;
+            }
+        }
     }
 }
 

@@ -2,6 +2,7 @@
 //! `f_I = −Σ V_p σ_p ∇Ψ_Ip + Σ m_p Ψ_Ip b_p`.
 
 use crate::grid::{Grid, GridNodes};
+use crate::integration::VcCorrection;
 use crate::particles::Particles;
 use crate::shape::Stencils;
 use crate::{Matrix, Vector};
@@ -10,8 +11,9 @@ use crate::{Matrix, Vector};
 ///
 /// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
 ///   particle's own, or the updated ones in the second map of MUSL).
-/// * `forces`: `Some((gravity, body))` also accumulates mass and force (`body` the per-particle
-///   body accelerations, if any); `None` maps momentum only.
+/// * `forces`: `Some((gravity, body, vc))` also accumulates mass and force (`body` the
+///   per-particle body accelerations, if any; `vc` the gradient corrections of VC integration,
+///   used in the internal force only); `None` maps momentum only.
 ///
 /// Serial in particle order, so the sums do not depend on the thread count.
 pub fn particle_to_grid<const D: usize>(
@@ -20,7 +22,7 @@ pub fn particle_to_grid<const D: usize>(
     stencils: &Stencils<D>,
     velocity: &(dyn Fn(usize) -> Vector<D> + Sync),
     affine: Option<&(dyn Fn(usize) -> Matrix<D> + Sync)>,
-    forces: Option<(Vector<D>, Option<&[Vector<D>]>)>,
+    forces: Option<(Vector<D>, Option<&[Vector<D>]>, Option<&VcCorrection<D>>)>,
     nodes: &mut GridNodes<D>,
 ) {
     for p in 0..ps.len() {
@@ -29,7 +31,8 @@ pub fn particle_to_grid<const D: usize>(
         let v = velocity(p);
         let c = affine.map(|a| a(p));
         let xp = ps.position[p];
-        let force = forces.map(|(g, body)| {
+        let vc = forces.and_then(|f| f.2);
+        let force = forces.map(|(g, body, _)| {
             let b = match body {
                 Some(b) => g + b[p],
                 None => g,
@@ -48,8 +51,12 @@ pub fn particle_to_grid<const D: usize>(
             }
             nodes.momentum[n] += (m * w) * mv;
             if let Some((vs, b)) = force {
+                let grad = match vc {
+                    Some(vc) => gs[s] + vc.gradient_correction(grid, nodes, n, &xp),
+                    None => gs[s],
+                };
                 nodes.mass[n] += m * w;
-                nodes.force[n] += vs * gs[s] + (m * w) * b;
+                nodes.force[n] += vs * grad + (m * w) * b;
             }
         }
     }

@@ -1,0 +1,257 @@
+//! Variationally consistent (VC) integration (Chen, Hillman & Rüter 2013; METHOD.md section 3).
+//!
+//! Particles are the quadrature points. The test-function gradients are corrected per node so that
+//! the discrete divergence equality of order `n` holds: for every monomial `Q` of degree ≤ n − 1,
+//!
+//! ```text
+//! Σ_p ∇̂Ψ_I Q V_p + Σ_p Ψ_I ∇Q V_p = Σ_b Ψ_I Q n_b a_b,     ∇̂Ψ_I = ∇Ψ_I + Σ_j ξ_Ij Q_j
+//! ```
+//!
+//! which is, per node and direction, one small linear system with the moment matrix
+//! `A_I = Σ_p Q Qᵀ V_p` over the particles in the node's support. Order 1 is the seed's form
+//! (`Q = 1`): `ξ_I = (B_I − D_I) / W_I`. `Q` is written in `(x − x_I)/h` to keep `A_I`
+//! well conditioned. A node whose `A_I` is singular (too few particles in its support for the
+//! order) falls back to the order-1 correction.
+//!
+//! The corrected gradient is used in the internal force only (METHOD.md section 7).
+
+pub mod boundary_points;
+
+pub use boundary_points::BoundaryPoints;
+
+use crate::error::{Error, Result};
+use crate::grid::{Grid, GridNodes};
+use crate::shape::Stencils;
+use crate::Vector;
+use nalgebra::{DMatrix, DVector};
+
+/// The per-node gradient corrections of one step.
+#[derive(Debug, Clone)]
+pub struct VcCorrection<const D: usize> {
+    pub order: u32,
+    /// Exponents of the monomials of degree ≤ order − 1.
+    basis: Vec<[u32; D]>,
+    /// Per active node (slot): the moment matrix `A_I`, `m × m`.
+    moment: Vec<f64>,
+    /// Per slot: right-hand sides, then the solutions `ξ`, `m` values per direction.
+    xi: Vec<f64>,
+    /// Slots with at least one particle in their support.
+    used: Vec<bool>,
+    /// Slots whose moment matrix was singular, corrected to order 1 only.
+    reduced: Vec<bool>,
+}
+
+impl<const D: usize> VcCorrection<D> {
+    /// Order 1 to 4.
+    pub fn new(order: u32) -> Result<Self> {
+        if !(1..=4).contains(&order) {
+            return Err(Error::invalid(format!(
+                "vc_order must lie in 1..=4, got {order}"
+            )));
+        }
+        let mut basis = Vec::new();
+        for k in 0..(order as usize).pow(D as u32) {
+            let mut e = [0u32; D];
+            let mut r = k;
+            for ea in e.iter_mut() {
+                *ea = (r % order as usize) as u32;
+                r /= order as usize;
+            }
+            if e.iter().sum::<u32>() < order {
+                basis.push(e);
+            }
+        }
+        basis.sort_by_key(|e| e.iter().sum::<u32>());
+        Ok(VcCorrection {
+            order,
+            basis,
+            moment: Vec::new(),
+            xi: Vec::new(),
+            used: Vec::new(),
+            reduced: Vec::new(),
+        })
+    }
+
+    fn m(&self) -> usize {
+        self.basis.len()
+    }
+
+    /// `Q(z)` and, when `dq` is given, `∂Q/∂z_k` for every k (`dq[k * m + j]`).
+    #[inline]
+    fn basis_at(&self, z: &Vector<D>, q: &mut [f64], dq: Option<&mut [f64]>) {
+        let m = self.m();
+        for (j, e) in self.basis.iter().enumerate() {
+            q[j] = (0..D).map(|a| z[a].powi(e[a] as i32)).product();
+        }
+        if let Some(dq) = dq {
+            for k in 0..D {
+                for (j, e) in self.basis.iter().enumerate() {
+                    dq[k * m + j] = if e[k] == 0 {
+                        0.0
+                    } else {
+                        (0..D)
+                            .map(|a| {
+                                if a == k {
+                                    e[a] as f64 * z[a].powi(e[a] as i32 - 1)
+                                } else {
+                                    z[a].powi(e[a] as i32)
+                                }
+                            })
+                            .product()
+                    };
+                }
+            }
+        }
+    }
+
+    /// Computes `ξ_I` for every node touched by a particle: the particle sums over their
+    /// stencils, the boundary sums over the stencils of the boundary points. Marks the nodes
+    /// active in `nodes`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn compute(
+        &mut self,
+        grid: &Grid<D>,
+        positions: &[Vector<D>],
+        volumes: &[f64],
+        stencils: &Stencils<D>,
+        boundary: &BoundaryPoints<D>,
+        boundary_stencils: &Stencils<D>,
+        nodes: &mut GridNodes<D>,
+    ) {
+        let m = self.m();
+        let h = grid.cell_size;
+        let mut q = vec![0.0; m];
+        let mut dq = vec![0.0; m * D];
+        // Particle sums: A_I += V Q Qᵀ; rhs_Ik −= V (∂_k Ψ Q + Ψ ∂_k Q).
+        for p in 0..positions.len() {
+            let (ns, ws, gs) = stencils.of(p);
+            let v = volumes[p];
+            for s in 0..ns.len() {
+                if ws[s] == 0.0 && gs[s] == Vector::<D>::zeros() {
+                    continue;
+                }
+                let n = ns[s];
+                let slot = self.slot_for(nodes, n, m);
+                let z = (positions[p] - grid.node_position(grid.node_multi_index(n))) / h;
+                self.basis_at(&z, &mut q, Some(&mut dq));
+                let a = &mut self.moment[slot * m * m..(slot + 1) * m * m];
+                for i in 0..m {
+                    for j in 0..m {
+                        a[i * m + j] += v * q[i] * q[j];
+                    }
+                }
+                let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
+                for k in 0..D {
+                    for j in 0..m {
+                        r[k * m + j] -= v * (gs[s][k] * q[j] + ws[s] * dq[k * m + j] / h);
+                    }
+                }
+                self.used[slot] = true;
+            }
+        }
+        // Boundary sums: rhs_Ik += Ψ_I Q (n a)_k, only at nodes whose support meets a point.
+        for b in 0..boundary.len() {
+            let (ns, ws, _) = boundary_stencils.of(b);
+            let na = boundary.area_normal[b];
+            for s in 0..ns.len() {
+                if ws[s] == 0.0 {
+                    continue;
+                }
+                let n = ns[s];
+                let slot = self.slot_for(nodes, n, m);
+                let z = (boundary.position[b] - grid.node_position(grid.node_multi_index(n))) / h;
+                self.basis_at(&z, &mut q, None);
+                let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
+                for k in 0..D {
+                    for j in 0..m {
+                        r[k * m + j] += ws[s] * q[j] * na[k];
+                    }
+                }
+            }
+        }
+        // Solve A_I ξ_Ik = rhs_Ik per node.
+        for slot in 0..nodes.active.len() {
+            if !self.used[slot] {
+                continue;
+            }
+            let a = DMatrix::from_row_slice(m, m, &self.moment[slot * m * m..(slot + 1) * m * m]);
+            let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
+            // A moment matrix whose particles lie (nearly) on a lower-dimensional set cannot
+            // carry the higher constraints: relative smallest eigenvalue below 1e-8.
+            let well_posed = m > 1 && {
+                let eig = a.clone().symmetric_eigenvalues();
+                eig.min() > 1e-8 * eig.max()
+            };
+            let chol = if well_posed {
+                a.clone().cholesky()
+            } else {
+                None
+            };
+            self.reduced[slot] = m > 1 && chol.is_none();
+            for k in 0..D {
+                let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
+                match &chol {
+                    Some(c) => r[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice()),
+                    None => {
+                        // Order 1, or a singular A_I: the constant correction alone.
+                        let c0 = rhs[0] / a[(0, 0)];
+                        r[k * m..(k + 1) * m].fill(0.0);
+                        r[k * m] = c0;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The slot of node `n`, growing and zeroing the per-slot storage for a new one.
+    fn slot_for(&mut self, nodes: &mut GridNodes<D>, n: usize, m: usize) -> usize {
+        let fresh = nodes.active.len();
+        let slot = nodes.touch(n);
+        if slot == fresh {
+            let (mm, md) = (m * m, m * D);
+            for (v, per) in [(&mut self.moment, mm), (&mut self.xi, md)] {
+                let end = (slot + 1) * per;
+                if v.len() < end {
+                    v.resize(end, 0.0);
+                }
+                v[slot * per..end].fill(0.0);
+            }
+            if self.used.len() <= slot {
+                self.used.resize(slot + 1, false);
+                self.reduced.resize(slot + 1, false);
+            }
+            self.used[slot] = false;
+            self.reduced[slot] = false;
+        }
+        slot
+    }
+
+    /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.
+    pub fn reduced_to_first_order(&self, nodes: &GridNodes<D>, n: usize) -> bool {
+        self.reduced.get(nodes.slot(n)).copied().unwrap_or(false)
+    }
+
+    /// The correction `Σ_j ξ_Ij Q_j(x)` to add to `∇Ψ_I(x)` for the node `n` (already active).
+    #[inline]
+    pub fn gradient_correction(
+        &self,
+        grid: &Grid<D>,
+        nodes: &GridNodes<D>,
+        n: usize,
+        x: &Vector<D>,
+    ) -> Vector<D> {
+        let m = self.m();
+        let slot = nodes.slot(n);
+        let r = &self.xi[slot * m * D..(slot + 1) * m * D];
+        if m == 1 {
+            return Vector::<D>::from_fn(|k, _| r[k]);
+        }
+        let mut q = [0.0; 64];
+        let z = (x - grid.node_position(grid.node_multi_index(n))) / grid.cell_size;
+        self.basis_at(&z, &mut q[..m], None);
+        Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum())
+    }
+}
+
+#[cfg(test)]
+mod tests;
