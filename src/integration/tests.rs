@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)]
 //! VC integration: the divergence equalities after correction (and not before), and the linear
 //! patch test under jittered particles.
 

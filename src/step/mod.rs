@@ -17,7 +17,7 @@ mod particle_to_grid;
 
 pub use grid_to_particle::{grid_to_particle, velocity_gradient, ParticleUpdate};
 pub use grid_update::grid_update;
-pub use particle_to_grid::particle_to_grid;
+pub use particle_to_grid::{particle_to_grid, Forces};
 
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
@@ -212,7 +212,11 @@ impl<const D: usize> Sim<D> {
             &velocity,
             plan.apic
                 .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
-            Some((self.options.gravity, body, self.vc.as_ref())),
+            Some(Forces {
+                gravity: self.options.gravity,
+                body,
+                vc: self.vc.as_ref(),
+            }),
             &mut work.nodes,
         );
         if boundary.has_tractions() {

@@ -7,13 +7,21 @@ use crate::particles::Particles;
 use crate::shape::Stencils;
 use crate::{Matrix, Vector};
 
+/// What the first map accumulates besides momentum: mass and forces.
+#[derive(Clone, Copy)]
+pub struct Forces<'a, const D: usize> {
+    pub gravity: Vector<D>,
+    /// Per-particle body accelerations from the callback, if any.
+    pub body: Option<&'a [Vector<D>]>,
+    /// Gradient corrections of VC integration (internal force only), if on.
+    pub vc: Option<&'a VcCorrection<D>>,
+}
+
 /// Scatters particle quantities to the nodes of their stencils and marks those nodes active.
 ///
 /// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
 ///   particle's own, or the updated ones in the second map of MUSL).
-/// * `forces`: `Some((gravity, body, vc))` also accumulates mass and force (`body` the
-///   per-particle body accelerations, if any; `vc` the gradient corrections of VC integration,
-///   used in the internal force only); `None` maps momentum only.
+/// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
 ///
 /// Serial in particle order, so the sums do not depend on the thread count.
 pub fn particle_to_grid<const D: usize>(
@@ -22,7 +30,7 @@ pub fn particle_to_grid<const D: usize>(
     stencils: &Stencils<D>,
     velocity: &(dyn Fn(usize) -> Vector<D> + Sync),
     affine: Option<&(dyn Fn(usize) -> Matrix<D> + Sync)>,
-    forces: Option<(Vector<D>, Option<&[Vector<D>]>, Option<&VcCorrection<D>>)>,
+    forces: Option<Forces<D>>,
     nodes: &mut GridNodes<D>,
 ) {
     for p in 0..ps.len() {
@@ -31,11 +39,11 @@ pub fn particle_to_grid<const D: usize>(
         let v = velocity(p);
         let c = affine.map(|a| a(p));
         let xp = ps.position[p];
-        let vc = forces.and_then(|f| f.2);
-        let force = forces.map(|(g, body, _)| {
-            let b = match body {
-                Some(b) => g + b[p],
-                None => g,
+        let vc = forces.and_then(|f| f.vc);
+        let force = forces.map(|f| {
+            let b = match f.body {
+                Some(b) => f.gravity + b[p],
+                None => f.gravity,
             };
             (-ps.volume(p) * ps.stress[p], b)
         });
