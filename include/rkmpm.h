@@ -89,7 +89,7 @@ typedef enum RkmpmStatus {
    */
   RKMPM_ERR_IO = 11,
   /**
-   * The feature is not available in this version.
+   * The feature or combination of options is not available (for example APIC with RK order >= 2).
    */
   RKMPM_ERR_UNSUPPORTED = 12,
   /**
@@ -175,7 +175,9 @@ typedef uint32_t RkmpmField;
 #define RKMPM_INTEGRATION_MP 0
 
 /**
- * Variationally consistent integration of order `vc_order` (not yet in this version).
+ * Variationally consistent integration of order `vc_order` (1..4): test-function gradients
+ * corrected so the divergence equality of that order holds (needs boundary points; without any,
+ * they are generated from the particle lattice at the first step).
  */
 #define RKMPM_INTEGRATION_VC 1
 
@@ -342,7 +344,8 @@ enum RkmpmStatus rkmpm_sim_set_shape(struct RkmpmSim *sim,
                                      double rk_support);
 
 /**
- * Chooses the integration (before the first step).
+ * Chooses the integration (before the first step); `vc_order` (1..4) is read only for
+ * `RKMPM_INTEGRATION_VC`.
  *
  * # Safety
  * `sim` must be a live handle.
@@ -440,6 +443,30 @@ enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim,
                                          const double *positions,
                                          const double *volumes,
                                          const double *velocities);
+
+/**
+ * Adds `count` boundary points: `positions` (`count * dim`, on the material's surface, inside the
+ * grid), `area_normals` (`count * dim`, outward normal times area; length in 2D; non-zero) and
+ * `tractions` (`count * dim`, force per current area, or NULL for none). They move with the grid,
+ * update their normals by Nanson's formula, carry the tractions and close VC integration's
+ * divergence equality. All or nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle; the arrays must hold the stated number of values.
+ */
+enum RkmpmStatus rkmpm_sim_add_boundary_points(struct RkmpmSim *sim,
+                                               size_t count,
+                                               const double *positions,
+                                               const double *area_normals,
+                                               const double *tractions);
+
+/**
+ * Writes to `*out_count` the number of boundary points.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_count` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_boundary_point_count(const struct RkmpmSim *sim, size_t *out_count);
 
 /**
  * Writes `cfl · h / max_p(c_p + |v_p|)` to `*out_dt`; `cfl` in (0, 1] (0.2 to 0.5 is usual).
