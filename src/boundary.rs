@@ -194,6 +194,20 @@ impl<const D: usize> Walls<D> {
         }
     }
 
+    /// Moves boundary points that round-off put just beyond a fixed or slip wall back onto it.
+    pub fn clamp_to_walls(&self, grid: &Grid<D>, points: &mut [crate::step::BoundaryUpdate<D>]) {
+        let up = grid.upper();
+        for (axis, side, _) in self.mirrored_faces() {
+            for u in points.iter_mut() {
+                let x = &mut u.position[axis];
+                match side {
+                    Side::Low => *x = x.max(grid.origin[axis]),
+                    Side::High => *x = x.min(up[axis]),
+                }
+            }
+        }
+    }
+
     /// Applies the friction walls to the updated node velocities.
     pub fn apply_friction(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) {
         for axis in 0..D {

@@ -33,6 +33,7 @@ pub mod scenes;
 pub mod shape;
 pub mod sim;
 pub mod step;
+pub mod verification;
 
 pub use boundary::{Boundary, Side};
 pub use error::{Error, ErrorKind, Result};

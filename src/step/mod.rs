@@ -330,16 +330,30 @@ impl<const D: usize> Sim<D> {
             work.boundary_updates = boundary_updates;
             return Err(Error::new(kind, message));
         }
-        if let Some(b) = boundary_updates.iter().position(|u| {
-            !(u.position
+        // Boundary points on a fixed or slip wall stay on it (round-off may not push them out).
+        self.options
+            .walls
+            .clamp_to_walls(grid, &mut boundary_updates);
+        let bad = boundary_updates.iter().enumerate().find_map(|(b, u)| {
+            let what = if !u
+                .position
                 .iter()
                 .chain(u.area_normal.iter())
                 .all(|c| c.is_finite())
-                && crate::determinant(&u.deformation_gradient) > 0.0
-                && grid.contains(&u.position))
-        }) {
+            {
+                "has a non-finite value"
+            } else if crate::determinant(&u.deformation_gradient) <= 0.0 {
+                "is inverted"
+            } else if !grid.contains(&u.position) {
+                "would leave the grid"
+            } else {
+                return None;
+            };
+            Some((b, what))
+        });
+        if let Some((b, what)) = bad {
             let message = format!(
-                "step {} (t = {:e}, dt = {dt:e}) rejected: boundary point {b} is inverted, not finite or outside the grid",
+                "step {} (t = {:e}, dt = {dt:e}) rejected: boundary point {b} {what}",
                 self.steps + 1,
                 self.time
             );
