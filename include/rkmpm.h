@@ -30,12 +30,6 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
- * Largest accepted condition number of the moment matrix (normalized by `a`, so O(1)–O(1e4) for
- * sensible supports; a support too small for the order drives it to infinity).
- */
-#define MAX_CONDITION 1e10
-
-/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -133,7 +127,8 @@ typedef uint32_t RkmpmBoundary;
  * Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
  * the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
  * of every particle into `accelerations` and return 0; any other return value makes the step
- * fail with `RKMPM_ERR_CALLBACK` and leaves the simulation unchanged.
+ * fail with `RKMPM_ERR_CALLBACK` and leaves the simulation unchanged. The callback must not call
+ * any `rkmpm_sim_*` function on the simulation that is stepping.
  */
 typedef int32_t (*RkmpmBodyForceFn)(void *user_data,
                                     double time,
@@ -292,8 +287,9 @@ const char *rkmpm_status_str(int32_t status);
 
 /**
  * Copies the message of the last failed call on this thread into `buf` (at most `len - 1`
- * bytes and a NUL) and returns the message's full length in bytes, without the NUL. `buf` may be
- * NULL when `len` is 0, to ask for the length.
+ * bytes and a NUL) and returns the message's full length in bytes, without the NUL (0 when no
+ * call on this thread has failed). Messages start with the name of the failed function. `buf`
+ * may be NULL when `len` is 0, to ask for the length.
  *
  * # Safety
  * `buf` must be valid for `len` bytes of writes when `len > 0`.
@@ -356,7 +352,8 @@ enum RkmpmStatus rkmpm_sim_set_integration(struct RkmpmSim *sim,
 
 /**
  * Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] is read only
- * for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC).
+ * for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2 is refused by the first
+ * step (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
  *
  * # Safety
  * `sim` must be a live handle.
@@ -470,6 +467,7 @@ enum RkmpmStatus rkmpm_sim_boundary_point_count(const struct RkmpmSim *sim, size
 
 /**
  * Writes `cfl · h / max_p(c_p + |v_p|)` to `*out_dt`; `cfl` in (0, 1] (0.2 to 0.5 is usual).
+ * With no particles there is no wave speed: `RKMPM_ERR_INVALID_STATE`.
  *
  * # Safety
  * `sim` must be a live handle; `out_dt` valid for a write.

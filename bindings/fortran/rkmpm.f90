@@ -1,0 +1,988 @@
+!> Fortran 2018 bindings of rkmpm, the embeddable Material Point Method engine.
+!>
+!> Two layers:
+!>  - private raw `bind(C)` interfaces, one per C function of include/rkmpm.h, named as in C,
+!>    each with its C prototype as a comment;
+!>  - a public layer: the derived type `rkmpm_sim` with type-bound procedures, named constants for
+!>    every enum value of the header, and a few library-level functions.
+!>
+!> Layout: vectors are stored dimension-fastest in C (x[p*dim + d]), which is x(dim, n) in Fortran
+!> with no copy; tensors (stress, deformation gradient) are dim*dim values per particle in C's
+!> row-major order, i.e. the transpose when read as a Fortran (dim, dim) matrix.
+!>
+!> Errors: every procedure that can fail takes optional `stat` (receives the RKMPM_* status) and
+!> `errmsg` (receives the library's message). When `stat` is absent and the call fails, the
+!> program stops with `error stop` and the message. On failure the simulation is unchanged.
+!>
+!> Lifetime: `call sim%init(...)` creates the simulation, `call sim%free()` releases it (and may
+!> be called again, or on a never-initialized object). The type has no `final` procedure on
+!> purpose: intrinsic assignment `b = a` copies the handle, and a finalizer would then release the
+!> same simulation twice (or leave `b` dangling). Treat an rkmpm_sim like a file unit: one owner,
+!> freed once; do not assign one rkmpm_sim to another.
+!>
+!> Queries (dim, time, step_count, stable_dt, field_len, boundary_point_count) are functions that
+!> also take `stat` and `errmsg`, so they are impure: read them into variables before combining
+!> them in `.and.`/`.or.` expressions, which gfortran may short-circuit (-Wfunction-elimination).
+!>
+!> Threads: one thread at a time per simulation; the library's error message is per thread.
+module rkmpm
+   use, intrinsic :: iso_c_binding, only: c_ptr, c_funptr, c_null_ptr, c_null_funptr, c_null_char, &
+                                          c_char, c_int, c_int32_t, c_int64_t, c_size_t, c_double, &
+                                          c_associated, c_f_pointer, c_funloc
+   implicit none (type, external)
+   private
+
+   ! ---------------------------------------------------------------------------------------------
+   ! Constants (same names and values as include/rkmpm.h)
+   ! ---------------------------------------------------------------------------------------------
+
+   !> The binary interface version these bindings were written for; compare it with
+   !> rkmpm_library_abi_version(). (The C macro RKMPM_ABI_VERSION cannot keep its name in
+   !> Fortran: names are case-insensitive and rkmpm_abi_version is the C function.)
+   integer(c_int32_t), parameter, public :: RKMPM_BINDING_ABI_VERSION = 1
+
+   ! enum RkmpmStatus (a C enum: int-sized)
+   integer(c_int), parameter, public :: RKMPM_OK = 0
+   integer(c_int), parameter, public :: RKMPM_ERR_NULL_POINTER = 1
+   integer(c_int), parameter, public :: RKMPM_ERR_INVALID_ARGUMENT = 2
+   integer(c_int), parameter, public :: RKMPM_ERR_BUFFER_TOO_SMALL = 3
+   integer(c_int), parameter, public :: RKMPM_ERR_INVALID_STATE = 4
+   integer(c_int), parameter, public :: RKMPM_ERR_UNKNOWN_MATERIAL = 5
+   integer(c_int), parameter, public :: RKMPM_ERR_OUTSIDE_GRID = 6
+   integer(c_int), parameter, public :: RKMPM_ERR_UNSTABLE_TIME_STEP = 7
+   integer(c_int), parameter, public :: RKMPM_ERR_NON_FINITE = 8
+   integer(c_int), parameter, public :: RKMPM_ERR_INVERTED_PARTICLE = 9
+   integer(c_int), parameter, public :: RKMPM_ERR_CALLBACK = 10
+   integer(c_int), parameter, public :: RKMPM_ERR_IO = 11
+   integer(c_int), parameter, public :: RKMPM_ERR_UNSUPPORTED = 12
+   integer(c_int), parameter, public :: RKMPM_ERR_PANIC = 13
+
+   ! RkmpmShape (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_SHAPE_LINEAR = 0
+   integer(c_int32_t), parameter, public :: RKMPM_SHAPE_BSPLINE2 = 1
+   integer(c_int32_t), parameter, public :: RKMPM_SHAPE_BSPLINE3 = 2
+   integer(c_int32_t), parameter, public :: RKMPM_SHAPE_RK = 3
+   ! RkmpmIntegration (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_INTEGRATION_MP = 0
+   integer(c_int32_t), parameter, public :: RKMPM_INTEGRATION_VC = 1
+   ! RkmpmTransfer (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_TRANSFER_PIC_FLIP = 0
+   integer(c_int32_t), parameter, public :: RKMPM_TRANSFER_APIC = 1
+   ! RkmpmScheme (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_SCHEME_USL = 0
+   integer(c_int32_t), parameter, public :: RKMPM_SCHEME_MUSL = 1
+   ! RkmpmBoundary (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_FREE = 0
+   integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_FIXED = 1
+   integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_SLIP = 2
+   integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_FRICTION = 3
+   ! RkmpmField (uint32_t); values per particle in the comment
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_POSITION = 0              ! dim
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_VELOCITY = 1              ! dim
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_DISPLACEMENT = 2          ! dim
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_STRESS = 3                ! dim*dim, row-major
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_PRESSURE = 4              ! 1
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_VOLUME = 5                ! 1
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_MASS = 6                  ! 1
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_REFERENCE_POSITION = 7    ! dim
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_DEFORMATION_GRADIENT = 8  ! dim*dim, row-major
+
+   ! Sides of a grid face (rkmpm_sim_set_boundary)
+   integer(c_int32_t), parameter, public :: RKMPM_SIDE_LOW = -1
+   integer(c_int32_t), parameter, public :: RKMPM_SIDE_HIGH = 1
+
+   ! ---------------------------------------------------------------------------------------------
+   ! The body-force callback
+   ! ---------------------------------------------------------------------------------------------
+
+   public :: rkmpm_body_force_fn
+   abstract interface
+      !> typedef int32_t (*RkmpmBodyForceFn)(void *user_data, double time, size_t count, uint32_t dim,
+      !>     const double *reference_positions, const double *positions, double *accelerations);
+      !>
+      !> Body force per unit mass of every particle: write accelerations(:, p) and return 0; any
+      !> other value fails the step with RKMPM_ERR_CALLBACK. Called once per step, on the thread
+      !> that calls step, with the time at the start of the step. Write it as a `bind(C)`
+      !> function with this interface; it must not call back into the simulation that is stepping.
+      integer(c_int32_t) function rkmpm_body_force_fn(user_data, time, count, dim, reference_positions, &
+                                                      positions, accelerations) bind(C)
+         import :: c_ptr, c_double, c_size_t, c_int32_t
+         type(c_ptr), value :: user_data
+         real(c_double), value :: time
+         integer(c_size_t), value :: count
+         integer(c_int32_t), value :: dim
+         real(c_double), intent(in) :: reference_positions(dim, count)
+         real(c_double), intent(in) :: positions(dim, count)
+         real(c_double), intent(inout) :: accelerations(dim, count)
+      end function rkmpm_body_force_fn
+   end interface
+
+   ! ---------------------------------------------------------------------------------------------
+   ! The simulation handle
+   ! ---------------------------------------------------------------------------------------------
+
+   !> A simulation. No `final` procedure: see the module comment (intrinsic assignment copies the
+   !> handle). Create with init, release with free.
+   type, public :: rkmpm_sim
+      private
+      type(c_ptr) :: h = c_null_ptr
+   contains
+      procedure :: init => sim_init
+      procedure :: free => sim_free
+      procedure :: is_initialized => sim_is_initialized
+      procedure :: dim => sim_dim
+      procedure :: set_shape => sim_set_shape
+      procedure :: set_integration => sim_set_integration
+      procedure :: set_transfer => sim_set_transfer
+      procedure :: set_scheme => sim_set_scheme
+      procedure :: set_gravity => sim_set_gravity
+      procedure :: set_boundary => sim_set_boundary
+      procedure :: set_body_force => sim_set_body_force
+      procedure :: add_material_linear_elastic => sim_add_material_linear_elastic
+      procedure :: add_material_neo_hookean => sim_add_material_neo_hookean
+      procedure :: add_particles => sim_add_particles
+      procedure :: add_boundary_points => sim_add_boundary_points
+      procedure :: boundary_point_count => sim_boundary_point_count
+      procedure :: stable_dt => sim_stable_dt
+      procedure :: step => sim_step
+      procedure :: time => sim_time
+      procedure :: step_count => sim_step_count
+      procedure :: particle_count => sim_particle_count
+      procedure :: field_len => sim_field_len
+      procedure, private :: sim_get_particles_1d
+      procedure, private :: sim_get_particles_2d
+      generic :: get_particles => sim_get_particles_1d, sim_get_particles_2d
+      procedure :: write_vtk => sim_write_vtk
+      procedure :: write_vtk_frame => sim_write_vtk_frame
+   end type rkmpm_sim
+
+   public :: rkmpm_version_string, rkmpm_library_abi_version, rkmpm_status_string, rkmpm_last_error
+
+   ! ---------------------------------------------------------------------------------------------
+   ! Raw C interfaces (private)
+   ! ---------------------------------------------------------------------------------------------
+
+   interface
+      ! const char *rkmpm_version(void);
+      type(c_ptr) function rkmpm_version() bind(C, name="rkmpm_version")
+         import :: c_ptr
+      end function rkmpm_version
+
+      ! uint32_t rkmpm_abi_version(void);
+      integer(c_int32_t) function rkmpm_abi_version() bind(C, name="rkmpm_abi_version")
+         import :: c_int32_t
+      end function rkmpm_abi_version
+
+      ! const char *rkmpm_status_str(int32_t status);
+      type(c_ptr) function rkmpm_status_str(status) bind(C, name="rkmpm_status_str")
+         import :: c_ptr, c_int32_t
+         integer(c_int32_t), value :: status
+      end function rkmpm_status_str
+
+      ! size_t rkmpm_last_error_message(char *buf, size_t len);
+      integer(c_size_t) function rkmpm_last_error_message(buf, len) bind(C, name="rkmpm_last_error_message")
+         import :: c_size_t, c_char
+         character(kind=c_char), intent(inout) :: buf(*)
+         integer(c_size_t), value :: len
+      end function rkmpm_last_error_message
+
+      ! enum RkmpmStatus rkmpm_sim_new(uint32_t dim, const double *origin, const size_t *cells,
+      !                                double cell_size, struct RkmpmSim **out);
+      integer(c_int) function rkmpm_sim_new(dim, origin, cells, cell_size, out) bind(C, name="rkmpm_sim_new")
+         import :: c_int, c_int32_t, c_double, c_size_t, c_ptr
+         integer(c_int32_t), value :: dim
+         real(c_double), intent(in) :: origin(*)
+         integer(c_size_t), intent(in) :: cells(*)
+         real(c_double), value :: cell_size
+         type(c_ptr), intent(out) :: out
+      end function rkmpm_sim_new
+
+      ! void rkmpm_sim_free(struct RkmpmSim *sim);
+      subroutine rkmpm_sim_free(sim) bind(C, name="rkmpm_sim_free")
+         import :: c_ptr
+         type(c_ptr), value :: sim
+      end subroutine rkmpm_sim_free
+
+      ! enum RkmpmStatus rkmpm_sim_dim(const struct RkmpmSim *sim, uint32_t *out_dim);
+      integer(c_int) function rkmpm_sim_dim(sim, out_dim) bind(C, name="rkmpm_sim_dim")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), intent(out) :: out_dim
+      end function rkmpm_sim_dim
+
+      ! enum RkmpmStatus rkmpm_sim_set_shape(struct RkmpmSim *sim, RkmpmShape shape,
+      !                                      uint32_t rk_order, double rk_support);
+      integer(c_int) function rkmpm_sim_set_shape(sim, shape, rk_order, rk_support) &
+         bind(C, name="rkmpm_sim_set_shape")
+         import :: c_int, c_ptr, c_int32_t, c_double
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: shape
+         integer(c_int32_t), value :: rk_order
+         real(c_double), value :: rk_support
+      end function rkmpm_sim_set_shape
+
+      ! enum RkmpmStatus rkmpm_sim_set_integration(struct RkmpmSim *sim,
+      !                                            RkmpmIntegration integration, uint32_t vc_order);
+      integer(c_int) function rkmpm_sim_set_integration(sim, integration, vc_order) &
+         bind(C, name="rkmpm_sim_set_integration")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: integration
+         integer(c_int32_t), value :: vc_order
+      end function rkmpm_sim_set_integration
+
+      ! enum RkmpmStatus rkmpm_sim_set_transfer(struct RkmpmSim *sim, RkmpmTransfer transfer,
+      !                                         double flip_ratio);
+      integer(c_int) function rkmpm_sim_set_transfer(sim, transfer, flip_ratio) &
+         bind(C, name="rkmpm_sim_set_transfer")
+         import :: c_int, c_ptr, c_int32_t, c_double
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: transfer
+         real(c_double), value :: flip_ratio
+      end function rkmpm_sim_set_transfer
+
+      ! enum RkmpmStatus rkmpm_sim_set_scheme(struct RkmpmSim *sim, RkmpmScheme scheme);
+      integer(c_int) function rkmpm_sim_set_scheme(sim, scheme) bind(C, name="rkmpm_sim_set_scheme")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: scheme
+      end function rkmpm_sim_set_scheme
+
+      ! enum RkmpmStatus rkmpm_sim_set_gravity(struct RkmpmSim *sim, const double *g);
+      integer(c_int) function rkmpm_sim_set_gravity(sim, g) bind(C, name="rkmpm_sim_set_gravity")
+         import :: c_int, c_ptr, c_double
+         type(c_ptr), value :: sim
+         real(c_double), intent(in) :: g(*)
+      end function rkmpm_sim_set_gravity
+
+      ! enum RkmpmStatus rkmpm_sim_set_boundary(struct RkmpmSim *sim, uint32_t axis, int32_t side,
+      !                                         RkmpmBoundary kind, double friction);
+      integer(c_int) function rkmpm_sim_set_boundary(sim, axis, side, kind, friction) &
+         bind(C, name="rkmpm_sim_set_boundary")
+         import :: c_int, c_ptr, c_int32_t, c_double
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: axis
+         integer(c_int32_t), value :: side
+         integer(c_int32_t), value :: kind
+         real(c_double), value :: friction
+      end function rkmpm_sim_set_boundary
+
+      ! enum RkmpmStatus rkmpm_sim_set_body_force(struct RkmpmSim *sim, RkmpmBodyForceFn f,
+      !                                           void *user_data);
+      integer(c_int) function rkmpm_sim_set_body_force(sim, f, user_data) &
+         bind(C, name="rkmpm_sim_set_body_force")
+         import :: c_int, c_ptr, c_funptr
+         type(c_ptr), value :: sim
+         type(c_funptr), value :: f
+         type(c_ptr), value :: user_data
+      end function rkmpm_sim_set_body_force
+
+      ! enum RkmpmStatus rkmpm_sim_add_material_linear_elastic(struct RkmpmSim *sim, double density,
+      !                                                        double young, double poisson,
+      !                                                        uint32_t *out_id);
+      integer(c_int) function rkmpm_sim_add_material_linear_elastic(sim, density, young, poisson, out_id) &
+         bind(C, name="rkmpm_sim_add_material_linear_elastic")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: density
+         real(c_double), value :: young
+         real(c_double), value :: poisson
+         integer(c_int32_t), intent(out) :: out_id
+      end function rkmpm_sim_add_material_linear_elastic
+
+      ! enum RkmpmStatus rkmpm_sim_add_material_neo_hookean(struct RkmpmSim *sim, double density,
+      !                                                     double young, double poisson,
+      !                                                     uint32_t *out_id);
+      integer(c_int) function rkmpm_sim_add_material_neo_hookean(sim, density, young, poisson, out_id) &
+         bind(C, name="rkmpm_sim_add_material_neo_hookean")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: density
+         real(c_double), value :: young
+         real(c_double), value :: poisson
+         integer(c_int32_t), intent(out) :: out_id
+      end function rkmpm_sim_add_material_neo_hookean
+
+      ! enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim, uint32_t material, size_t count,
+      !                                          const double *positions, const double *volumes,
+      !                                          const double *velocities);   /* velocities may be NULL */
+      integer(c_int) function rkmpm_sim_add_particles(sim, material, count, positions, volumes, velocities) &
+         bind(C, name="rkmpm_sim_add_particles")
+         import :: c_int, c_ptr, c_int32_t, c_size_t, c_double
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: material
+         integer(c_size_t), value :: count
+         real(c_double), intent(in) :: positions(*)
+         real(c_double), intent(in) :: volumes(*)
+         real(c_double), intent(in), optional :: velocities(*)   ! absent -> NULL
+      end function rkmpm_sim_add_particles
+
+      ! enum RkmpmStatus rkmpm_sim_add_boundary_points(struct RkmpmSim *sim, size_t count,
+      !                                                const double *positions, const double *area_normals,
+      !                                                const double *tractions);   /* tractions may be NULL */
+      integer(c_int) function rkmpm_sim_add_boundary_points(sim, count, positions, area_normals, tractions) &
+         bind(C, name="rkmpm_sim_add_boundary_points")
+         import :: c_int, c_ptr, c_size_t, c_double
+         type(c_ptr), value :: sim
+         integer(c_size_t), value :: count
+         real(c_double), intent(in) :: positions(*)
+         real(c_double), intent(in) :: area_normals(*)
+         real(c_double), intent(in), optional :: tractions(*)   ! absent -> NULL
+      end function rkmpm_sim_add_boundary_points
+
+      ! enum RkmpmStatus rkmpm_sim_boundary_point_count(const struct RkmpmSim *sim, size_t *out_count);
+      integer(c_int) function rkmpm_sim_boundary_point_count(sim, out_count) &
+         bind(C, name="rkmpm_sim_boundary_point_count")
+         import :: c_int, c_ptr, c_size_t
+         type(c_ptr), value :: sim
+         integer(c_size_t), intent(out) :: out_count
+      end function rkmpm_sim_boundary_point_count
+
+      ! enum RkmpmStatus rkmpm_sim_stable_dt(const struct RkmpmSim *sim, double cfl, double *out_dt);
+      integer(c_int) function rkmpm_sim_stable_dt(sim, cfl, out_dt) bind(C, name="rkmpm_sim_stable_dt")
+         import :: c_int, c_ptr, c_double
+         type(c_ptr), value :: sim
+         real(c_double), value :: cfl
+         real(c_double), intent(out) :: out_dt
+      end function rkmpm_sim_stable_dt
+
+      ! enum RkmpmStatus rkmpm_sim_step(struct RkmpmSim *sim, double dt);
+      integer(c_int) function rkmpm_sim_step(sim, dt) bind(C, name="rkmpm_sim_step")
+         import :: c_int, c_ptr, c_double
+         type(c_ptr), value :: sim
+         real(c_double), value :: dt
+      end function rkmpm_sim_step
+
+      ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
+      integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
+         import :: c_int, c_ptr, c_double
+         type(c_ptr), value :: sim
+         real(c_double), intent(out) :: out_time
+      end function rkmpm_sim_time
+
+      ! enum RkmpmStatus rkmpm_sim_step_count(const struct RkmpmSim *sim, uint64_t *out_steps);
+      integer(c_int) function rkmpm_sim_step_count(sim, out_steps) bind(C, name="rkmpm_sim_step_count")
+         import :: c_int, c_ptr, c_int64_t
+         type(c_ptr), value :: sim
+         integer(c_int64_t), intent(out) :: out_steps
+      end function rkmpm_sim_step_count
+
+      ! size_t rkmpm_sim_particle_count(const struct RkmpmSim *sim);
+      integer(c_size_t) function rkmpm_sim_particle_count(sim) bind(C, name="rkmpm_sim_particle_count")
+         import :: c_size_t, c_ptr
+         type(c_ptr), value :: sim
+      end function rkmpm_sim_particle_count
+
+      ! enum RkmpmStatus rkmpm_sim_field_len(const struct RkmpmSim *sim, RkmpmField field,
+      !                                      size_t *out_len);
+      integer(c_int) function rkmpm_sim_field_len(sim, field, out_len) bind(C, name="rkmpm_sim_field_len")
+         import :: c_int, c_ptr, c_int32_t, c_size_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: field
+         integer(c_size_t), intent(out) :: out_len
+      end function rkmpm_sim_field_len
+
+      ! enum RkmpmStatus rkmpm_sim_get_particles(const struct RkmpmSim *sim, RkmpmField field,
+      !                                          double *out, size_t len);
+      integer(c_int) function rkmpm_sim_get_particles(sim, field, out, len) &
+         bind(C, name="rkmpm_sim_get_particles")
+         import :: c_int, c_ptr, c_int32_t, c_double, c_size_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: field
+         real(c_double), intent(inout) :: out(*)   ! inout: on failure nothing is written
+         integer(c_size_t), value :: len
+      end function rkmpm_sim_get_particles
+
+      ! enum RkmpmStatus rkmpm_sim_write_vtk(const struct RkmpmSim *sim, const char *path);
+      integer(c_int) function rkmpm_sim_write_vtk(sim, path) bind(C, name="rkmpm_sim_write_vtk")
+         import :: c_int, c_ptr, c_char
+         type(c_ptr), value :: sim
+         character(kind=c_char), intent(in) :: path(*)
+      end function rkmpm_sim_write_vtk
+
+      ! enum RkmpmStatus rkmpm_sim_write_vtk_frame(struct RkmpmSim *sim, const char *prefix);
+      integer(c_int) function rkmpm_sim_write_vtk_frame(sim, prefix) bind(C, name="rkmpm_sim_write_vtk_frame")
+         import :: c_int, c_ptr, c_char
+         type(c_ptr), value :: sim
+         character(kind=c_char), intent(in) :: prefix(*)
+      end function rkmpm_sim_write_vtk_frame
+
+      ! size_t strlen(const char *s);   (C library, to read the static strings above)
+      integer(c_size_t) function c_strlen(s) bind(C, name="strlen")
+         import :: c_size_t, c_ptr
+         type(c_ptr), value :: s
+      end function c_strlen
+   end interface
+
+contains
+
+   ! ---------------------------------------------------------------------------------------------
+   ! Library-level functions
+   ! ---------------------------------------------------------------------------------------------
+
+   !> A copy of a NUL-terminated C string (empty for NULL).
+   function c_string(p) result(s)
+      type(c_ptr), intent(in) :: p
+      character(:), allocatable :: s
+      character(kind=c_char), pointer :: chars(:)
+      integer(c_size_t) :: n, i
+      if (.not. c_associated(p)) then
+         s = ''
+         return
+      end if
+      n = c_strlen(p)
+      call c_f_pointer(p, chars, [n])
+      allocate (character(len=n) :: s)
+      do i = 1, n
+         s(i:i) = chars(i)
+      end do
+   end function c_string
+
+   !> The library version, e.g. "0.1.0".
+   function rkmpm_version_string() result(version)
+      character(:), allocatable :: version
+      version = c_string(rkmpm_version())
+   end function rkmpm_version_string
+
+   !> The binary interface version of the linked library; it must equal RKMPM_BINDING_ABI_VERSION.
+   integer(c_int32_t) function rkmpm_library_abi_version()
+      rkmpm_library_abi_version = rkmpm_abi_version()
+   end function rkmpm_library_abi_version
+
+   !> A short description of a status code ("unknown status" for a number that is none).
+   function rkmpm_status_string(status) result(text)
+      integer(c_int), intent(in) :: status
+      character(:), allocatable :: text
+      text = c_string(rkmpm_status_str(int(status, c_int32_t)))
+   end function rkmpm_status_string
+
+   !> The message of the last failed rkmpm call on this thread ('' if none failed).
+   function rkmpm_last_error() result(message)
+      character(:), allocatable :: message
+      character(kind=c_char) :: probe(1)
+      character(kind=c_char), allocatable :: buf(:)
+      integer(c_size_t) :: n, i
+      probe(1) = c_null_char
+      n = rkmpm_last_error_message(probe, 1_c_size_t)   ! writes only the NUL, returns the length
+      allocate (buf(n + 1))
+      n = min(n, rkmpm_last_error_message(buf, n + 1))
+      allocate (character(len=n) :: message)
+      do i = 1, n
+         message(i:i) = buf(i)
+      end do
+   end function rkmpm_last_error
+
+   !> Reports `status`: sets `stat` when present and `text` to the message ('' on success); on
+   !> failure without `stat`, stops. `message` replaces the library's message for failures found
+   !> in these bindings.
+   !> (Callers copy `text` into their own optional `errmsg`: passing an optional deferred-length
+   !> dummy straight through to another procedure loses its length in gfortran 12.)
+   subroutine report(status, what, stat, text, message)
+      integer(c_int), intent(in) :: status
+      character(*), intent(in) :: what
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out) :: text
+      character(*), intent(in), optional :: message
+      if (present(stat)) stat = status
+      if (status == RKMPM_OK) then
+         text = ''
+         return
+      end if
+      if (present(message)) then
+         text = what//': '//message
+      else
+         text = rkmpm_last_error()
+         if (len(text) == 0) text = what//': '//rkmpm_status_string(status)
+      end if
+      if (.not. present(stat)) error stop 'rkmpm: '//text
+   end subroutine report
+
+   !> The dimension of a live handle (0 when the handle is not live).
+   integer(c_int32_t) function handle_dim(h)
+      type(c_ptr), intent(in) :: h
+      integer(c_int32_t) :: d
+      handle_dim = 0
+      if (.not. c_associated(h)) return
+      if (rkmpm_sim_dim(h, d) == RKMPM_OK) handle_dim = d
+   end function handle_dim
+
+   ! ---------------------------------------------------------------------------------------------
+   ! rkmpm_sim
+   ! ---------------------------------------------------------------------------------------------
+
+   !> Creates a simulation on a uniform grid: dim = size(origin) (2 or 3), `cells` cell counts per
+   !> axis (size dim), `cell_size` > 0. Fails with RKMPM_ERR_INVALID_STATE if `self` already holds
+   !> a simulation (free it first).
+   subroutine sim_init(self, origin, cells, cell_size, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: origin(:)
+      integer, intent(in) :: cells(:)
+      real(c_double), intent(in) :: cell_size
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_size_t), allocatable :: c_cells(:)
+      real(c_double), allocatable :: c_origin(:)
+      type(c_ptr) :: h
+      integer(c_int) :: status
+      if (c_associated(self%h)) then
+         call report(RKMPM_ERR_INVALID_STATE, 'init', stat, text, &
+                     'this rkmpm_sim already holds a simulation; call free first')
+         if (present(errmsg)) errmsg = text
+         return
+      end if
+      if (size(cells) /= size(origin)) then
+         call report(RKMPM_ERR_INVALID_ARGUMENT, 'init', stat, text, &
+                     'origin and cells must have the same size (the dimension)')
+         if (present(errmsg)) errmsg = text
+         return
+      end if
+      if (any(cells < 0)) then
+         call report(RKMPM_ERR_INVALID_ARGUMENT, 'init', stat, text, 'cell counts must not be negative')
+         if (present(errmsg)) errmsg = text
+         return
+      end if
+      ! Copies so that a zero-size dummy still passes valid storage (dim 0 is an error in C).
+      allocate (c_cells(max(size(cells), 1)), c_origin(max(size(origin), 1)))
+      c_cells = 0
+      c_origin = 0
+      c_cells(1:size(cells)) = int(cells, c_size_t)
+      c_origin(1:size(origin)) = origin
+      status = rkmpm_sim_new(int(size(origin), c_int32_t), c_origin, c_cells, cell_size, h)
+      if (status == RKMPM_OK) self%h = h
+      call report(status, 'init', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_init
+
+   !> Releases the simulation; safe to call more than once and on a never-initialized object.
+   subroutine sim_free(self)
+      class(rkmpm_sim), intent(inout) :: self
+      call rkmpm_sim_free(self%h)
+      self%h = c_null_ptr
+   end subroutine sim_free
+
+   !> Whether the object holds a simulation.
+   logical function sim_is_initialized(self)
+      class(rkmpm_sim), intent(in) :: self
+      sim_is_initialized = c_associated(self%h)
+   end function sim_is_initialized
+
+   !> The dimension (2 or 3).
+   integer(c_int32_t) function sim_dim(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: d
+      d = 0
+      call report(rkmpm_sim_dim(self%h, d), 'dim', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_dim = d
+   end function sim_dim
+
+   !> Chooses the shape function (before the first step); `rk_order` (1..5) and `rk_support` (in
+   !> cells: about 2 for order 1, 3 for order 2) are read for RKMPM_SHAPE_RK only (defaults 1 and 2).
+   !> A support too small for the order is refused (RKMPM_ERR_INVALID_ARGUMENT); RK of order >= 2
+   !> needs RKMPM_TRANSFER_PIC_FLIP (with APIC the first step fails with RKMPM_ERR_UNSUPPORTED).
+   subroutine sim_set_shape(self, shape, rk_order, rk_support, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: shape
+      integer(c_int32_t), intent(in), optional :: rk_order
+      real(c_double), intent(in), optional :: rk_support
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: order
+      real(c_double) :: support
+      order = 1
+      support = 2
+      if (present(rk_order)) order = rk_order
+      if (present(rk_support)) support = rk_support
+      call report(rkmpm_sim_set_shape(self%h, shape, order, support), 'set_shape', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_shape
+
+   !> Chooses the integration (before the first step); `vc_order` (1..4, default 1) for VC only.
+   !> VC uses the boundary points (add_boundary_points); without any, they are generated from the
+   !> particle lattice at the first step.
+   subroutine sim_set_integration(self, integration, vc_order, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: integration
+      integer(c_int32_t), intent(in), optional :: vc_order
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: order
+      order = 1
+      if (present(vc_order)) order = vc_order
+      call report(rkmpm_sim_set_integration(self%h, integration, order), 'set_integration', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_integration
+
+   !> Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] (default 0,
+   !> pure PIC) is read for RKMPM_TRANSFER_PIC_FLIP only.
+   subroutine sim_set_transfer(self, transfer, flip_ratio, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: transfer
+      real(c_double), intent(in), optional :: flip_ratio
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      real(c_double) :: flip
+      flip = 0
+      if (present(flip_ratio)) flip = flip_ratio
+      call report(rkmpm_sim_set_transfer(self%h, transfer, flip), 'set_transfer', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_transfer
+
+   !> Chooses USL or MUSL (before the first step).
+   subroutine sim_set_scheme(self, scheme, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: scheme
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_set_scheme(self%h, scheme), 'set_scheme', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_scheme
+
+   !> Sets gravity, size(g) == dim finite values.
+   subroutine sim_set_gravity(self, g, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: g(:)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      real(c_double) :: gc(3)
+      if (c_associated(self%h)) then
+         if (size(g) /= handle_dim(self%h)) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'set_gravity', stat, text, 'size(g) must equal the dimension')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+      end if
+      gc = 0
+      gc(1:min(size(g), 3)) = g(1:min(size(g), 3))
+      call report(rkmpm_sim_set_gravity(self%h, gc), 'set_gravity', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_gravity
+
+   !> Sets the condition on the face `side` (RKMPM_SIDE_LOW = -1 or RKMPM_SIDE_HIGH = +1) of
+   !> `axis` (0-based as in C: 0 .. dim-1); `friction` (default 0) for RKMPM_BOUNDARY_FRICTION.
+   subroutine sim_set_boundary(self, axis, side, kind, friction, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: axis
+      integer(c_int32_t), intent(in) :: side
+      integer(c_int32_t), intent(in) :: kind
+      real(c_double), intent(in), optional :: friction
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      real(c_double) :: mu
+      if (axis < 0) then
+         call report(RKMPM_ERR_INVALID_ARGUMENT, 'set_boundary', stat, text, 'axis must not be negative')
+         if (present(errmsg)) errmsg = text
+         return
+      end if
+      mu = 0
+      if (present(friction)) mu = friction
+      call report(rkmpm_sim_set_boundary(self%h, axis, side, kind, mu), 'set_boundary', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_boundary
+
+   !> Sets the body-force callback `f` (a bind(C) function with the interface
+   !> rkmpm_body_force_fn) and its `user_data` (default C NULL, e.g. c_loc of a target variable
+   !> that lives while the callback is set). Without `f`, removes the callback.
+   subroutine sim_set_body_force(self, f, user_data, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      procedure(rkmpm_body_force_fn), optional :: f
+      type(c_ptr), intent(in), optional :: user_data
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      type(c_funptr) :: fp
+      type(c_ptr) :: ud
+      fp = c_null_funptr
+      ud = c_null_ptr
+      if (present(f)) fp = c_funloc(f)
+      if (present(user_data)) ud = user_data
+      call report(rkmpm_sim_set_body_force(self%h, fp, ud), 'set_body_force', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_body_force
+
+   !> Adds a small-strain linear elastic material; `id` receives its id (for add_particles).
+   subroutine sim_add_material_linear_elastic(self, density, young, poisson, id, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: density, young, poisson
+      integer(c_int32_t), intent(out) :: id
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: out_id
+      out_id = -1
+      call report(rkmpm_sim_add_material_linear_elastic(self%h, density, young, poisson, out_id), &
+                  'add_material_linear_elastic', stat, text)
+      if (present(errmsg)) errmsg = text
+      id = out_id
+   end subroutine sim_add_material_linear_elastic
+
+   !> Adds a compressible neo-Hookean material; `id` receives its id.
+   subroutine sim_add_material_neo_hookean(self, density, young, poisson, id, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: density, young, poisson
+      integer(c_int32_t), intent(out) :: id
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: out_id
+      out_id = -1
+      call report(rkmpm_sim_add_material_neo_hookean(self%h, density, young, poisson, out_id), &
+                  'add_material_neo_hookean', stat, text)
+      if (present(errmsg)) errmsg = text
+      id = out_id
+   end subroutine sim_add_material_neo_hookean
+
+   !> Adds size(x, 2) particles of `material`: positions x(dim, n), volumes(n) and optional
+   !> velocities(dim, n) (at rest when absent). All or nothing.
+   subroutine sim_add_particles(self, material, x, volumes, velocities, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: material
+      real(c_double), contiguous, intent(in) :: x(:, :)
+      real(c_double), contiguous, intent(in) :: volumes(:)
+      real(c_double), contiguous, intent(in), optional :: velocities(:, :)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: d
+      integer(c_int) :: status
+      if (c_associated(self%h)) then
+         d = handle_dim(self%h)
+         if (size(x, 1) /= d) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_particles', stat, text, &
+                        'size(x, 1) must equal the dimension')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+         if (size(volumes) /= size(x, 2)) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_particles', stat, text, &
+                        'size(volumes) must equal size(x, 2), the number of particles')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+         if (present(velocities)) then
+            if (any(shape(velocities) /= shape(x))) then
+               call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_particles', stat, text, &
+                           'velocities must have the shape of x')
+               if (present(errmsg)) errmsg = text
+               return
+            end if
+         end if
+      end if
+      if (present(velocities)) then
+         status = rkmpm_sim_add_particles(self%h, material, int(size(x, 2), c_size_t), x, volumes, velocities)
+      else
+         status = rkmpm_sim_add_particles(self%h, material, int(size(x, 2), c_size_t), x, volumes)
+      end if
+      call report(status, 'add_particles', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_add_particles
+
+   !> Adds size(x, 2) boundary points on the material's surface: positions x(dim, n), outward
+   !> normals times area area_normals(dim, n) (length in 2D; non-zero) and optional tractions(dim, n)
+   !> (force per current area). They close VC integration's divergence equality and carry the
+   !> tractions. All or nothing.
+   subroutine sim_add_boundary_points(self, x, area_normals, tractions, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), contiguous, intent(in) :: x(:, :)
+      real(c_double), contiguous, intent(in) :: area_normals(:, :)
+      real(c_double), contiguous, intent(in), optional :: tractions(:, :)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int) :: status
+      if (c_associated(self%h)) then
+         if (size(x, 1) /= handle_dim(self%h)) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_boundary_points', stat, text, &
+                        'size(x, 1) must equal the dimension')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+         if (any(shape(area_normals) /= shape(x))) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_boundary_points', stat, text, &
+                        'area_normals must have the shape of x')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+         if (present(tractions)) then
+            if (any(shape(tractions) /= shape(x))) then
+               call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_boundary_points', stat, text, &
+                           'tractions must have the shape of x')
+               if (present(errmsg)) errmsg = text
+               return
+            end if
+         end if
+      end if
+      if (present(tractions)) then
+         status = rkmpm_sim_add_boundary_points(self%h, int(size(x, 2), c_size_t), x, area_normals, tractions)
+      else
+         status = rkmpm_sim_add_boundary_points(self%h, int(size(x, 2), c_size_t), x, area_normals)
+      end if
+      call report(status, 'add_boundary_points', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_add_boundary_points
+
+   !> The number of boundary points.
+   integer(c_size_t) function sim_boundary_point_count(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_size_t) :: n
+      n = 0
+      call report(rkmpm_sim_boundary_point_count(self%h, n), 'boundary_point_count', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_boundary_point_count = n
+   end function sim_boundary_point_count
+
+   !> cfl * h / max_p(c_p + |v_p|), with cfl in (0, 1].
+   real(c_double) function sim_stable_dt(self, cfl, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      real(c_double), intent(in) :: cfl
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      real(c_double) :: dt
+      dt = 0
+      call report(rkmpm_sim_stable_dt(self%h, cfl, dt), 'stable_dt', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_stable_dt = dt
+   end function sim_stable_dt
+
+   !> Advances by dt; on failure the simulation keeps its last good state.
+   subroutine sim_step(self, dt, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: dt
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_step(self%h, dt), 'step', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_step
+
+   !> The simulated time.
+   real(c_double) function sim_time(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      real(c_double) :: t
+      t = 0
+      call report(rkmpm_sim_time(self%h, t), 'time', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_time = t
+   end function sim_time
+
+   !> The number of steps taken.
+   integer(c_int64_t) function sim_step_count(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int64_t) :: n
+      n = 0
+      call report(rkmpm_sim_step_count(self%h, n), 'step_count', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_step_count = n
+   end function sim_step_count
+
+   !> The number of particles (0 for an uninitialized object).
+   integer(c_size_t) function sim_particle_count(self)
+      class(rkmpm_sim), intent(in) :: self
+      sim_particle_count = rkmpm_sim_particle_count(self%h)
+   end function sim_particle_count
+
+   !> How many values get_particles writes for `field` (particle count times values per particle).
+   integer(c_size_t) function sim_field_len(self, field, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int32_t), intent(in) :: field
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_size_t) :: n
+      n = 0
+      call report(rkmpm_sim_field_len(self%h, field, n), 'field_len', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_field_len = n
+   end function sim_field_len
+
+   !> Copies `field` of every particle into out(:) (particle-major, see the RKMPM_FIELD_*
+   !> comments); size(out) must be at least field_len(field) (else RKMPM_ERR_BUFFER_TOO_SMALL
+   !> and nothing is written).
+   subroutine sim_get_particles_1d(self, field, out, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int32_t), intent(in) :: field
+      real(c_double), contiguous, intent(inout) :: out(:)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_get_particles(self%h, field, out, int(size(out), c_size_t)), &
+                  'get_particles', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_get_particles_1d
+
+   !> Copies `field` into out(k, p) = value k of particle p: size(out, 1) must be the number of
+   !> values per particle (dim, dim*dim or 1) and size(out, 2) at least the particle count.
+   subroutine sim_get_particles_2d(self, field, out, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int32_t), intent(in) :: field
+      real(c_double), contiguous, intent(inout) :: out(:, :)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_size_t) :: n, count
+      integer(c_int) :: status
+      status = rkmpm_sim_field_len(self%h, field, n)
+      if (status /= RKMPM_OK) then
+         call report(status, 'get_particles', stat, text)
+         if (present(errmsg)) errmsg = text
+         return
+      end if
+      count = rkmpm_sim_particle_count(self%h)
+      if (count > 0) then
+         if (int(size(out, 1), c_size_t) /= n / count) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'get_particles', stat, text, &
+                        'size(out, 1) must equal the number of values per particle of the field')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+      end if
+      call report(rkmpm_sim_get_particles(self%h, field, out, int(size(out), c_size_t)), &
+                  'get_particles', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_get_particles_2d
+
+   !> Writes the particles to one VTK .vtu file at trim(path).
+   subroutine sim_write_vtk(self, path, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      character(*), intent(in) :: path
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_write_vtk(self%h, trim(path)//c_null_char), 'write_vtk', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_write_vtk
+
+   !> Writes the next frame <prefix>_NNNNN.vtu of a time series and rewrites <prefix>.pvd
+   !> (prefix = trim(prefix)).
+   subroutine sim_write_vtk_frame(self, prefix, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      character(*), intent(in) :: prefix
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_write_vtk_frame(self%h, trim(prefix)//c_null_char), 'write_vtk_frame', &
+                  stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_write_vtk_frame
+
+end module rkmpm
