@@ -232,7 +232,10 @@ impl<const D: usize> Sim<D> {
         area_normals: &[Vector<D>],
         tractions: Option<&[Vector<D>]>,
     ) -> Result<()> {
-        if let Some(p) = positions.iter().position(|x| x.iter().any(|c| !c.is_finite())) {
+        if let Some(p) = positions
+            .iter()
+            .position(|x| x.iter().any(|c| !c.is_finite()))
+        {
             return Err(Error::invalid(format!(
                 "position of boundary point {p} is not finite"
             )));
