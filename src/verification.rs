@@ -132,7 +132,7 @@ pub fn run_mms<const D: usize>(
             r /= n;
             // Two-point Gauss abscissae of each cell: (cell + 1/2 ± 1/(2√3)) h.
             let cell = (i / 2) as f64;
-            let side = if i % 2 == 0 { -1.0 } else { 1.0 };
+            let side = if i.is_multiple_of(2) { -1.0 } else { 1.0 };
             (cell + 0.5 + side * 0.5 / 3f64.sqrt()) * h
         }));
     }
