@@ -21,7 +21,7 @@ pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
 use crate::grid::{Grid, GridNodes};
-use crate::shape::Stencils;
+use crate::shape::{Monomials, Stencils};
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
 
@@ -29,8 +29,8 @@ use nalgebra::{DMatrix, DVector};
 #[derive(Debug, Clone)]
 pub struct VcCorrection<const D: usize> {
     pub order: u32,
-    /// Exponents of the monomials of degree ≤ order − 1.
-    basis: Vec<[u32; D]>,
+    /// The test polynomials `Q`: monomials of degree ≤ order − 1.
+    basis: Monomials<D>,
     /// Per active node (slot): the moment matrix `A_I`, `m × m`.
     moment: Vec<f64>,
     /// Per slot: right-hand sides, then the solutions `ξ`, `m` values per direction.
@@ -49,22 +49,9 @@ impl<const D: usize> VcCorrection<D> {
                 "vc_order must lie in 1..=4, got {order}"
             )));
         }
-        let mut basis = Vec::new();
-        for k in 0..(order as usize).pow(D as u32) {
-            let mut e = [0u32; D];
-            let mut r = k;
-            for ea in e.iter_mut() {
-                *ea = (r % order as usize) as u32;
-                r /= order as usize;
-            }
-            if e.iter().sum::<u32>() < order {
-                basis.push(e);
-            }
-        }
-        basis.sort_by_key(|e| e.iter().sum::<u32>());
         Ok(VcCorrection {
             order,
-            basis,
+            basis: Monomials::up_to(order - 1),
             moment: Vec::new(),
             xi: Vec::new(),
             used: Vec::new(),
@@ -80,26 +67,10 @@ impl<const D: usize> VcCorrection<D> {
     #[inline]
     fn basis_at(&self, z: &Vector<D>, q: &mut [f64], dq: Option<&mut [f64]>) {
         let m = self.m();
-        for (j, e) in self.basis.iter().enumerate() {
-            q[j] = (0..D).map(|a| z[a].powi(e[a] as i32)).product();
-        }
+        self.basis.values(z, &mut q[..m]);
         if let Some(dq) = dq {
             for k in 0..D {
-                for (j, e) in self.basis.iter().enumerate() {
-                    dq[k * m + j] = if e[k] == 0 {
-                        0.0
-                    } else {
-                        (0..D)
-                            .map(|a| {
-                                if a == k {
-                                    e[a] as f64 * z[a].powi(e[a] as i32 - 1)
-                                } else {
-                                    z[a].powi(e[a] as i32)
-                                }
-                            })
-                            .product()
-                    };
-                }
+                self.basis.derivatives(z, k, &mut dq[k * m..(k + 1) * m]);
             }
         }
     }

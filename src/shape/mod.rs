@@ -6,9 +6,11 @@
 //! implementing [`ShapeFunction`] and nothing in the step changes.
 
 mod bspline;
+mod monomials;
 mod rk;
 
 pub use bspline::{BSpline, BSplineOrder};
+pub use monomials::Monomials;
 pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
 
 use crate::error::Result;

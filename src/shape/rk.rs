@@ -11,7 +11,7 @@
 //! over one cell, when the shape function is built, and a support that makes `M` singular or badly
 //! conditioned is refused.
 
-use super::ShapeFunction;
+use super::{Monomials, ShapeFunction};
 use crate::error::{Error, Result};
 use crate::grid::Grid;
 use crate::Vector;
@@ -46,8 +46,8 @@ pub fn cubic_kernel(s: f64) -> (f64, f64) {
 pub struct ReproducingKernel<const D: usize> {
     pub order: u32,
     pub support: f64,
-    /// Exponents of the basis monomials, `[0; D]` first.
-    exponents: Vec<[u32; D]>,
+    /// The basis `H`: monomials of degree ≤ order.
+    basis: Monomials<D>,
     /// Nodes per axis in the stencil.
     width: usize,
 }
@@ -67,14 +67,10 @@ impl<const D: usize> ReproducingKernel<D> {
                 "rk_support (normalized support ã) must lie in (0.5, 8], got {support}"
             )));
         }
-        let mut exponents = Vec::new();
-        for degree in 0..=order {
-            monomials::<D>(degree, &mut [0; D], 0, &mut exponents);
-        }
         let rk = ReproducingKernel {
             order,
             support,
-            exponents,
+            basis: Monomials::up_to(order),
             width: (2.0 * support).ceil() as usize + 1,
         };
         let worst = rk.worst_condition();
@@ -89,7 +85,7 @@ impl<const D: usize> ReproducingKernel<D> {
 
     /// Number of basis monomials.
     pub fn basis_len(&self) -> usize {
-        self.exponents.len()
+        self.basis.len()
     }
 
     fn first_node(&self, xi: f64) -> i64 {
@@ -175,41 +171,12 @@ impl<const D: usize> ReproducingKernel<D> {
 
     /// `H(z)`: the monomials at `z`.
     fn basis(&self, z: &Vector<D>, h: &mut DVector<f64>) {
-        for (i, e) in self.exponents.iter().enumerate() {
-            h[i] = (0..D).map(|a| z[a].powi(e[a] as i32)).product();
-        }
+        self.basis.values(z, h.as_mut_slice());
     }
 
     /// `∂H/∂z_k`.
     fn basis_derivative(&self, z: &Vector<D>, k: usize, dh: &mut DVector<f64>) {
-        for (i, e) in self.exponents.iter().enumerate() {
-            dh[i] = if e[k] == 0 {
-                0.0
-            } else {
-                (0..D)
-                    .map(|a| {
-                        if a == k {
-                            e[a] as f64 * z[a].powi(e[a] as i32 - 1)
-                        } else {
-                            z[a].powi(e[a] as i32)
-                        }
-                    })
-                    .product()
-            };
-        }
-    }
-}
-
-/// Appends the exponents of all monomials of exactly `degree` in `D` variables.
-fn monomials<const D: usize>(degree: u32, e: &mut [u32; D], axis: usize, out: &mut Vec<[u32; D]>) {
-    if axis == D - 1 {
-        e[axis] = degree;
-        out.push(*e);
-        return;
-    }
-    for p in (0..=degree).rev() {
-        e[axis] = p;
-        monomials::<D>(degree - p, e, axis + 1, out);
+        self.basis.derivatives(z, k, dh.as_mut_slice());
     }
 }
 
