@@ -112,6 +112,51 @@ pub fn run_mms<const D: usize>(
     t_end: f64,
     cfl: f64,
 ) -> Result<MmsRun> {
+    run_mms_with_particles::<D>(mms, cells, 2, shape, integration, transfer, t_end, cfl)
+}
+
+/// Gauss–Legendre abscissae on [0, 1] and weights (summing to 1) for 1 to 4 points.
+fn gauss_rule(n: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+    let (x, w): (Vec<f64>, Vec<f64>) = match n {
+        1 => (vec![0.0], vec![2.0]),
+        2 => (vec![-1.0 / 3f64.sqrt(), 1.0 / 3f64.sqrt()], vec![1.0, 1.0]),
+        3 => (
+            vec![-(0.6f64).sqrt(), 0.0, 0.6f64.sqrt()],
+            vec![5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0],
+        ),
+        4 => {
+            let a = (3.0 / 7.0 - 2.0 / 7.0 * (1.2f64).sqrt()).sqrt();
+            let b = (3.0 / 7.0 + 2.0 / 7.0 * (1.2f64).sqrt()).sqrt();
+            let wa = (18.0 + 30f64.sqrt()) / 36.0;
+            let wb = (18.0 - 30f64.sqrt()) / 36.0;
+            (vec![-b, -a, a, b], vec![wb, wa, wa, wb])
+        }
+        _ => {
+            return Err(crate::Error::invalid(
+                "particles per cell per direction must be 1 to 4",
+            ))
+        }
+    };
+    Ok((
+        x.iter().map(|v| 0.5 * (v + 1.0)).collect(),
+        w.iter().map(|v| 0.5 * v).collect(),
+    ))
+}
+
+/// [`run_mms`] with `ppc` particles per cell per direction at the Gauss–Legendre points of each
+/// cell, with the Gauss weights as volumes. With VC, the boundary points are the Gauss points of
+/// the box's faces ([`unit_box_boundary`]).
+#[allow(clippy::too_many_arguments)]
+pub fn run_mms_with_particles<const D: usize>(
+    mms: &AxisAlignedMms,
+    cells: usize,
+    ppc: usize,
+    shape: Shape,
+    integration: Integration,
+    transfer: Transfer,
+    t_end: f64,
+    cfl: f64,
+) -> Result<MmsRun> {
     let h = 1.0 / cells as f64;
     let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [cells; D], h)?;
     sim.set_shape(shape)?;
@@ -122,22 +167,26 @@ pub fn run_mms<const D: usize>(
         sim.set_boundary(a, Side::High, Boundary::Slip)?;
     }
     let mat = sim.add_material(Material::neo_hookean(mms.density, mms.young, mms.poisson)?);
-    let n = 2 * cells;
-    let q = h / 2.0;
+    let (gx, gw) = gauss_rule(ppc)?;
+    let n = ppc * cells;
     let mut x = Vec::with_capacity(n.pow(D as u32));
+    let mut vol = Vec::with_capacity(n.pow(D as u32));
     for k in 0..n.pow(D as u32) {
         let mut r = k;
+        let mut v = 1.0;
         x.push(Vector::<D>::from_fn(|_, _| {
             let i = r % n;
             r /= n;
-            // Two-point Gauss abscissae of each cell: (cell + 1/2 ± 1/(2√3)) h.
-            let cell = (i / 2) as f64;
-            let side = if i.is_multiple_of(2) { -1.0 } else { 1.0 };
-            (cell + 0.5 + side * 0.5 / 3f64.sqrt()) * h
+            v *= gw[i % ppc] * h;
+            ((i / ppc) as f64 + gx[i % ppc]) * h
         }));
+        vol.push(v);
     }
-    let vol = vec![q.powi(D as i32); x.len()];
     sim.add_particles(mat, &x, &vol, None)?;
+    if matches!(integration, Integration::Vc { .. }) {
+        let (bx, bn) = unit_box_boundary::<D>(cells, ppc)?;
+        sim.add_boundary_points(&bx, &bn, None)?;
+    }
     let (lambda, mu) = mms.lame();
     let c_max = ((lambda + 2.0 * mu) / mms.density).sqrt() + mms.amplitude * 2.0 * PI * mms.c();
     let steps = (t_end / (cfl * h / c_max)).ceil() as usize;
@@ -244,5 +293,166 @@ mod tests {
         let h = [0.1, 0.05, 0.025];
         let e: Vec<f64> = h.iter().map(|v: &f64| 3.0 * v.powf(2.5)).collect();
         assert!((fitted_slope(&h, &e) - 2.5).abs() < 1e-12);
+    }
+}
+
+/// An elastic column compressed under its own weight (METHOD.md 6.6), in plane strain between
+/// slip walls, on a fixed floor: in equilibrium the vertical Cauchy stress at the material point
+/// that started at height `Y` is `σ_yy = −ρ0 g (H − Y)` exactly, for any material and any
+/// deformation (slip walls keep `F = diag(1, λ(Y))`, so `σ_yy = P_yy`).
+///
+/// Neo-Hookean, E = 1e5 Pa, ν = 0.3, ρ0 = 1000 kg/m³, H = 1 m, g = 10 m/s²: the bottom is compressed
+/// by about 10%, so particles cross cells. Gravity ramps up over 2 s and is held for 1 s; PIC
+/// damps the oscillations.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SelfWeightColumn {
+    pub height: f64,
+    pub young: f64,
+    pub poisson: f64,
+    pub density: f64,
+    pub gravity: f64,
+    pub ramp: f64,
+    pub hold: f64,
+}
+
+impl Default for SelfWeightColumn {
+    fn default() -> Self {
+        SelfWeightColumn {
+            height: 1.0,
+            young: 1e5,
+            poisson: 0.3,
+            density: 1000.0,
+            gravity: 10.0,
+            ramp: 2.0,
+            hold: 1.0,
+        }
+    }
+}
+
+/// The result of a column run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColumnRun {
+    pub cells: usize,
+    /// `sqrt(Σ (σ_yy − exact)² V0 / Σ exact² V0)` over all particles.
+    pub stress_error: f64,
+    pub seconds: f64,
+    /// Reference height and σ_yy of every particle of the column's central particle column.
+    pub profile: Vec<(f64, f64)>,
+}
+
+impl SelfWeightColumn {
+    /// Runs the column with `cells` cells over its height, 2 particles per cell per direction. The
+    /// column is as many cells wide as the shape function has ghost layers (at least 2), since the
+    /// mirrored side walls need that many.
+    pub fn run(
+        &self,
+        cells: usize,
+        shape: Shape,
+        integration: Integration,
+        transfer: Transfer,
+    ) -> Result<ColumnRun> {
+        let h = self.height / cells as f64;
+        let width = shape.build::<2>()?.ghost_layers().max(2);
+        let mut sim = Sim::<2>::new(Vector::<2>::zeros(), [width, cells + 2], h)?;
+        sim.set_shape(shape)?;
+        sim.set_transfer(transfer)?;
+        sim.set_integration(integration)?;
+        sim.set_boundary(0, Side::Low, Boundary::Slip)?;
+        sim.set_boundary(0, Side::High, Boundary::Slip)?;
+        sim.set_boundary(1, Side::Low, Boundary::Fixed)?;
+        let mat = sim.add_material(Material::neo_hookean(
+            self.density,
+            self.young,
+            self.poisson,
+        )?);
+        let q = h / 2.0;
+        let mut x = Vec::new();
+        for j in 0..2 * cells {
+            for i in 0..2 * width {
+                x.push(Vector::<2>::new((i as f64 + 0.5) * q, (j as f64 + 0.5) * q));
+            }
+        }
+        sim.add_particles(mat, &x, &vec![q * q; x.len()], None)?;
+        let dt = sim.stable_dt(0.3)? * 0.9;
+        let t_end = self.ramp + self.hold;
+        let steps = (t_end / dt).ceil() as usize;
+        let dt = t_end / steps as f64;
+        let start = std::time::Instant::now();
+        for _ in 0..steps {
+            let ramp = (sim.time() / self.ramp).min(1.0);
+            sim.set_gravity([0.0, -self.gravity * ramp])?;
+            sim.step(dt)?;
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let ps = sim.particles();
+        let (mut e2, mut s2) = (0.0, 0.0);
+        let mut profile = Vec::new();
+        for p in 0..ps.len() {
+            let y0 = ps.reference_position[p][1];
+            let exact = -self.density * self.gravity * (self.height - y0);
+            let s = ps.stress[p][(1, 1)];
+            e2 += (s - exact).powi(2) * ps.reference_volume[p];
+            s2 += exact * exact * ps.reference_volume[p];
+            if p % (2 * width) == width {
+                profile.push((y0, s));
+            }
+        }
+        Ok(ColumnRun {
+            cells,
+            stress_error: (e2 / s2).sqrt(),
+            seconds,
+            profile,
+        })
+    }
+}
+
+/// Boundary points on the faces of the box `[0, 1]^D` at the `ppc`-point Gauss–Legendre points
+/// of each cell face, with the Gauss weights as areas: an exact surface quadrature for VC.
+pub fn unit_box_boundary<const D: usize>(
+    cells: usize,
+    ppc: usize,
+) -> Result<(Vec<Vector<D>>, Vec<Vector<D>>)> {
+    let h = 1.0 / cells as f64;
+    let (gx, gw) = gauss_rule(ppc)?;
+    let n = ppc * cells;
+    let (mut x, mut na) = (Vec::new(), Vec::new());
+    for axis in 0..D {
+        for (side, normal) in [(0.0, -1.0), (1.0, 1.0)] {
+            for k in 0..n.pow(D as u32 - 1) {
+                let mut r = k;
+                let mut area = 1.0;
+                let p = Vector::<D>::from_fn(|a, _| {
+                    if a == axis {
+                        return side;
+                    }
+                    let i = r % n;
+                    r /= n;
+                    area *= gw[i % ppc] * h;
+                    ((i / ppc) as f64 + gx[i % ppc]) * h
+                });
+                let mut nv = Vector::<D>::zeros();
+                nv[axis] = normal * area;
+                x.push(p);
+                na.push(nv);
+            }
+        }
+    }
+    Ok((x, na))
+}
+
+#[cfg(test)]
+mod box_tests {
+    use super::*;
+
+    /// The face quadrature integrates the closed surface exactly: normals sum to zero, areas to 2D.
+    #[test]
+    fn unit_box_boundary_is_a_closed_surface() {
+        for ppc in 1..=4 {
+            let (x, na) = unit_box_boundary::<3>(3, ppc).unwrap();
+            assert_eq!(x.len(), 6 * (3 * ppc) * (3 * ppc));
+            assert!(na.iter().sum::<Vector<3>>().norm() < 1e-13);
+            let area: f64 = na.iter().map(|n| n.norm()).sum();
+            assert!((area - 6.0).abs() < 1e-12, "{area}");
+        }
     }
 }
