@@ -313,6 +313,10 @@ pub struct SelfWeightColumn {
     pub gravity: f64,
     pub ramp: f64,
     pub hold: f64,
+    /// Particles are moved from their lattice sites by up to `jitter` times the particle
+    /// spacing in each direction (0 for a regular lattice); the boundary points stay on the
+    /// lattice's faces.
+    pub jitter: f64,
 }
 
 impl Default for SelfWeightColumn {
@@ -325,6 +329,7 @@ impl Default for SelfWeightColumn {
             gravity: 10.0,
             ramp: 2.0,
             hold: 1.0,
+            jitter: 0.0,
         }
     }
 }
@@ -335,12 +340,35 @@ pub struct ColumnRun {
     pub cells: usize,
     /// `sqrt(Σ (σ_yy − exact)² V0 / Σ exact² V0)` over all particles.
     pub stress_error: f64,
+    /// The same for the pressure `−tr(σ)/3` against the exact pressure.
+    pub pressure_error: f64,
     pub seconds: f64,
-    /// Reference height and σ_yy of every particle of the column's central particle column.
-    pub profile: Vec<(f64, f64)>,
+    /// Reference height, σ_yy and pressure of the particles of one vertical line of particles.
+    pub profile: Vec<(f64, f64, f64)>,
 }
 
 impl SelfWeightColumn {
+    /// Exact pressure at the material point that started at height `y0`: the stretch `λ` solves
+    /// `σ_yy(λ) = μ (λ² − 1)/λ + Λ ln λ / λ = −ρ0 g (H − y0)` (Newton), then
+    /// `σ_xx = σ_zz = Λ ln λ / λ` and `p = −(2 σ_xx + σ_yy)/3`.
+    pub fn exact_pressure(&self, y0: f64) -> f64 {
+        let c = crate::material::ElasticConstants::new(self.density, self.young, self.poisson)
+            .expect("valid constants");
+        let target = -self.density * self.gravity * (self.height - y0);
+        let mut l = 1.0f64;
+        for _ in 0..50 {
+            let f = c.mu * (l * l - 1.0) / l + c.lambda * l.ln() / l - target;
+            let df = c.mu * (1.0 + 1.0 / (l * l)) + c.lambda * (1.0 - l.ln()) / (l * l);
+            let step = f / df;
+            l -= step;
+            if step.abs() < 1e-15 {
+                break;
+            }
+        }
+        let sxx = c.lambda * l.ln() / l;
+        -(2.0 * sxx + target) / 3.0
+    }
+
     /// Runs the column with `cells` cells over its height, 2 particles per cell per direction. The
     /// column is as many cells wide as the shape function has ghost layers (at least 2), since the
     /// mirrored side walls need that many.
@@ -366,13 +394,23 @@ impl SelfWeightColumn {
             self.poisson,
         )?);
         let q = h / 2.0;
-        let mut x = Vec::new();
+        let mut sites = Vec::new();
         for j in 0..2 * cells {
             for i in 0..2 * width {
-                x.push(Vector::<2>::new((i as f64 + 0.5) * q, (j as f64 + 0.5) * q));
+                sites.push(Vector::<2>::new((i as f64 + 0.5) * q, (j as f64 + 0.5) * q));
             }
         }
-        sim.add_particles(mat, &x, &vec![q * q; x.len()], None)?;
+        let mut rng = crate::shape::UniformRng::new(17);
+        let x: Vec<Vector<2>> = sites
+            .iter()
+            .map(|p| p + Vector::<2>::from_fn(|_, _| (2.0 * rng.uniform() - 1.0) * self.jitter * q))
+            .collect();
+        let vol = vec![q * q; x.len()];
+        sim.add_particles(mat, &x, &vol, None)?;
+        if matches!(integration, Integration::Vc { .. }) {
+            let (bx, bn) = crate::integration::BoundaryPoints::<2>::from_lattice(&sites, &vol);
+            sim.add_boundary_points(&bx, &bn, None)?;
+        }
         let dt = sim.stable_dt(0.3)? * 0.9;
         let t_end = self.ramp + self.hold;
         let steps = (t_end / dt).ceil() as usize;
@@ -385,21 +423,26 @@ impl SelfWeightColumn {
         }
         let seconds = start.elapsed().as_secs_f64();
         let ps = sim.particles();
-        let (mut e2, mut s2) = (0.0, 0.0);
+        let (mut e2, mut s2, mut pe2, mut p2) = (0.0, 0.0, 0.0, 0.0);
         let mut profile = Vec::new();
         for p in 0..ps.len() {
             let y0 = ps.reference_position[p][1];
+            let v0 = ps.reference_volume[p];
             let exact = -self.density * self.gravity * (self.height - y0);
             let s = ps.stress[p][(1, 1)];
-            e2 += (s - exact).powi(2) * ps.reference_volume[p];
-            s2 += exact * exact * ps.reference_volume[p];
+            e2 += (s - exact).powi(2) * v0;
+            s2 += exact * exact * v0;
+            let pex = self.exact_pressure(y0);
+            pe2 += (ps.pressure[p] - pex).powi(2) * v0;
+            p2 += pex * pex * v0;
             if p % (2 * width) == width {
-                profile.push((y0, s));
+                profile.push((y0, s, ps.pressure[p]));
             }
         }
         Ok(ColumnRun {
             cells,
             stress_error: (e2 / s2).sqrt(),
+            pressure_error: (pe2 / p2).sqrt(),
             seconds,
             profile,
         })

@@ -244,6 +244,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     column_study(&mut md, &out, quick)?;
+    pressure_study(&mut md, &out, quick)?;
     std::fs::write(out.join("README.md"), md)?;
     eprintln!("wrote {}", out.display());
     Ok(())
@@ -351,7 +352,7 @@ fn column_study(
             .draw_series(
                 r.profile
                     .iter()
-                    .map(|&(y, s)| Circle::new((y, s), 3, c.filled())),
+                    .map(|&(y, s, _)| Circle::new((y, s), 3, c.filled())),
             )?
             .label(format!("{name} ({} cells)", r.cells))
             .legend(move |(x, y)| Circle::new((x + 10, y), 4, c.filled()));
@@ -463,6 +464,129 @@ fn plot(
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// The nearly incompressible column (ν = 0.49) with jittered particles: pressure against the exact
+/// pressure, with and without VC, table and a profile plot.
+fn pressure_study(
+    md: &mut String,
+    out: &Path,
+    quick: bool,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let col = SelfWeightColumn {
+        poisson: 0.49,
+        jitter: 0.3,
+        ..Default::default()
+    };
+    let pic = Transfer::PicFlip { flip: 0.0 };
+    let grids: &[usize] = if quick { &[16] } else { &[16, 32] };
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let cases: [(&str, Shape, Integration); 6] = [
+        (
+            "linear (standard MPM)",
+            Shape::Linear,
+            Integration::MaterialPoint,
+        ),
+        ("B-spline 2", Shape::BSpline2, Integration::MaterialPoint),
+        (
+            "B-spline 2 + VC1",
+            Shape::BSpline2,
+            Integration::Vc { order: 1 },
+        ),
+        ("RK1", rk1, Integration::MaterialPoint),
+        ("RK1 + VC1", rk1, Integration::Vc { order: 1 }),
+        ("RK1 + VC2", rk1, Integration::Vc { order: 2 }),
+    ];
+    writeln!(
+        md,
+        "## Nearly incompressible column: pressure oscillation\n"
+    )?;
+    writeln!(md, "The column above with ν = 0.49 and particles jittered by up to ±30% of their spacing (boundary points on the lattice faces). Error: `sqrt(Σ (p − p_exact)² V0 / Σ p_exact² V0)` with the exact pressure of the uniaxial-strain neo-Hookean column at each particle's reference height (`SelfWeightColumn::exact_pressure`); it is the amplitude of the pressure oscillation.\n")?;
+    writeln!(md, "| method | cells over the height | pressure error | σ_yy error | run time (s) |\n|---|---|---|---|---|")?;
+    let mut profiles: Vec<(&str, ColumnRun)> = Vec::new();
+    for (name, shape, integration) in cases {
+        for &cells in grids {
+            match col.run(cells, shape, integration, pic) {
+                Ok(r) => {
+                    eprintln!(
+                        "pressure {name:<22} {cells:>3} cells: p error {:.3e}  {:.2} s",
+                        r.pressure_error, r.seconds
+                    );
+                    writeln!(
+                        md,
+                        "| {name} | {cells} | {:.3e} | {:.3e} | {:.2} |",
+                        r.pressure_error, r.stress_error, r.seconds
+                    )?;
+                    if cells == grids[0] && name.starts_with("RK1") && !name.ends_with("VC2") {
+                        profiles.push((name, r));
+                    }
+                }
+                Err(e) => writeln!(
+                    md,
+                    "| {name} | {cells} | failed: {} | | |",
+                    e.to_string().replace('|', "/")
+                )?,
+            }
+        }
+    }
+    writeln!(md, "\n![pressure along the column](pressure_profile.png)\n")?;
+    let path = out.join("pressure_profile.png");
+    let root = BitMapBackend::new(&path, (900, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let pmax = col.exact_pressure(0.0);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "ν = 0.49, jittered particles, {} cells: pressure along the height",
+                grids[0]
+            ),
+            ("sans-serif", 22),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..col.height, (-0.3 * pmax)..(1.4 * pmax))?;
+    chart
+        .configure_mesh()
+        .x_desc("reference height Y (m)")
+        .y_desc("pressure (Pa)")
+        .draw()?;
+    let exact: Vec<(f64, f64)> = (0..=100)
+        .map(|i| {
+            let y = col.height * i as f64 / 100.0;
+            (y, col.exact_pressure(y))
+        })
+        .collect();
+    chart
+        .draw_series(LineSeries::new(exact, BLACK.stroke_width(2)))?
+        .label("exact")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    for (i, (name, r)) in profiles.iter().enumerate() {
+        let c = COLORS[(i + 3) % COLORS.len()];
+        chart
+            .draw_series(LineSeries::new(
+                r.profile.iter().map(|&(y, _, p)| (y, p)),
+                c.stroke_width(1),
+            ))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart.draw_series(
+            r.profile
+                .iter()
+                .map(|&(y, _, p)| Circle::new((y, p), 3, c.filled())),
+        )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()?;

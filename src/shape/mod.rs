@@ -111,3 +111,22 @@ impl<const D: usize> Stencils<D> {
 
 #[cfg(test)]
 pub(crate) mod tests;
+
+/// A small deterministic generator of uniform numbers in [0, 1) (xorshift64*), for jittered
+/// particle sets in verification scenes and tests.
+#[derive(Debug, Clone)]
+pub struct UniformRng(u64);
+
+impl UniformRng {
+    pub fn new(seed: u64) -> Self {
+        UniformRng(seed.wrapping_mul(0x9E3779B97F4A7C15) | 1)
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}

@@ -4,20 +4,7 @@
 use super::*;
 use crate::{Matrix, Vector};
 
-/// A small deterministic generator for test points (xorshift64*).
-pub(crate) struct TestRng(u64);
-impl TestRng {
-    pub(crate) fn new(seed: u64) -> Self {
-        TestRng(seed.wrapping_mul(0x9E3779B97F4A7C15) | 1)
-    }
-    /// Uniform in [0, 1).
-    pub(crate) fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545F4914F6CDD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+pub(crate) use super::UniformRng as TestRng;
 
 fn grid_for<const D: usize>(shape: &dyn ShapeFunction<D>) -> Grid<D> {
     let mut g = Grid::<D>::new(Vector::<D>::from_element(-0.3), [5; D], 0.25).unwrap();
