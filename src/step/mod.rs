@@ -87,7 +87,8 @@ impl<const D: usize> Sim<D> {
             ));
         }
         self.check_options()?;
-        if self.vc.is_some() && self.boundary.is_empty() && self.steps == 0 {
+        let generate = self.vc.is_some() && self.boundary.is_empty() && self.steps == 0;
+        if generate {
             // VC needs the surface: take it from the particle lattice (documented).
             let (x, na) = BoundaryPoints::from_lattice(
                 &self.particles.position,
@@ -97,6 +98,10 @@ impl<const D: usize> Sim<D> {
         }
         let result = self.advance(dt);
         self.work.nodes.reset();
+        if result.is_err() && generate {
+            // A rejected step leaves everything as it was, the boundary points included.
+            self.boundary = BoundaryPoints::default();
+        }
         let updates = result?;
         self.commit(updates);
         self.time += dt;

@@ -414,3 +414,26 @@ fn rk_shape_functions_slot_into_the_step() {
     assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::Unsupported);
     assert_eq!(sim.steps(), 0);
 }
+
+/// With VC and no boundary points, the first step finds them on the particle lattice; a rejected
+/// first step leaves none behind, a successful one keeps them.
+#[test]
+fn lattice_boundary_points_come_with_a_successful_first_step_only() {
+    let mut sim = Sim::<2>::new([0.0, 0.0], [10, 10], 0.1).unwrap();
+    sim.set_integration(crate::sim::Integration::Vc { order: 1 })
+        .unwrap();
+    let m = sim.add_material(Material::linear_elastic(1.0, 1.0, 0.2).unwrap());
+    let x: Vec<Vector<2>> = (0..16)
+        .map(|k| Vector::<2>::new(0.425 + 0.05 * (k % 4) as f64, 0.425 + 0.05 * (k / 4) as f64))
+        .collect();
+    sim.add_particles(m, &x, &[0.0025; 16], None).unwrap();
+    sim.set_body_force(Some(Box::new(
+        |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], _a: &mut [Vector<2>]| Err("no".to_string()),
+    )));
+    let dt = sim.stable_dt(0.3).unwrap();
+    assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::Callback);
+    assert!(sim.boundary_points().is_empty());
+    sim.set_body_force(None);
+    sim.step(dt).unwrap();
+    assert_eq!(sim.boundary_points().len(), 16);
+}
