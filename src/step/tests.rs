@@ -437,3 +437,41 @@ fn lattice_boundary_points_come_with_a_successful_first_step_only() {
     sim.step(dt).unwrap();
     assert_eq!(sim.boundary_points().len(), 16);
 }
+
+/// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
+/// 2 worker threads (P2G runs in particle order; the parallel phases are per particle), for
+/// B-splines with APIC and for RK with VC.
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let run = |threads: usize, shape: Shape, vc: bool| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut sim = block::<2>(shape, Transfer::Apic);
+            if vc {
+                sim.set_integration(crate::sim::Integration::Vc { order: 1 })
+                    .unwrap();
+            }
+            sim.set_gravity([0.0, -9.81]).unwrap();
+            let dt = sim.stable_dt(0.3).unwrap();
+            for _ in 0..15 {
+                sim.step(dt).unwrap();
+            }
+            sim.particles().clone()
+        })
+    };
+    for (shape, vc) in [
+        (Shape::BSpline2, false),
+        (
+            Shape::Rk {
+                order: 1,
+                support: 2.0,
+            },
+            true,
+        ),
+    ] {
+        assert_eq!(run(1, shape, vc), run(2, shape, vc), "{shape:?}");
+    }
+}
