@@ -164,11 +164,31 @@ impl<const D: usize> Walls<D> {
                         nodes.mass[n] = 0.0;
                         nodes.force[n] = Vector::zeros();
                     }
+                    if let Some(l) = nodes.lumping.as_mut() {
+                        let p = wall.reflect(axis, &l.momentum[n]);
+                        l.momentum[m] += p;
+                        l.momentum[n] = Vector::zeros();
+                        if with_mass_and_force {
+                            l.mass[m] += l.mass[n];
+                            let f = wall.reflect(axis, &l.body_force[n]);
+                            l.body_force[m] += f;
+                            let f = wall.reflect(axis, &l.body_force_shape[n]);
+                            l.body_force_shape[m] += f;
+                            l.mass[n] = 0.0;
+                            l.body_force[n] = Vector::zeros();
+                            l.body_force_shape[n] = Vector::zeros();
+                        }
+                    }
                 } else if d == 0 {
                     for c in 0..D {
                         if wall.sign(axis, c) < 0.0 {
                             nodes.momentum[n][c] = 0.0;
                             nodes.force[n][c] = 0.0;
+                            if let Some(l) = nodes.lumping.as_mut() {
+                                l.momentum[n][c] = 0.0;
+                                l.body_force[n][c] = 0.0;
+                                l.body_force_shape[n][c] = 0.0;
+                            }
                         }
                     }
                 }

@@ -142,6 +142,10 @@ pub struct GridNodes<const D: usize> {
     pub velocity_old: Vec<Vector<D>>,
     /// Velocity after the grid update and boundary conditions.
     pub velocity: Vec<Vector<D>>,
+    /// For signed shape functions only (empty otherwise): what the nonnegative lumping weights
+    /// `L_I` add over `Ψ_I` to mass, momentum and body force, `Σ_p m_p (L_I − Ψ_I)(1, v_p, b_p)`.
+    /// The grid update blends them in where `Σ m_p Ψ_I` is small against `Σ m_p L_I`.
+    pub lumping: Option<LumpingShift<D>>,
     touched: Vec<bool>,
     /// Position of each touched node in `active` (valid only for touched nodes).
     slot: Vec<u32>,
@@ -161,6 +165,18 @@ impl<const D: usize> GridNodes<D> {
         self.touched = vec![false; n];
         self.slot = vec![0; n];
         self.active.clear();
+        if let Some(l) = self.lumping.as_mut() {
+            *l = LumpingShift::new(n);
+        }
+    }
+
+    /// Adds (or removes) the storage for the lumping shift of signed shape functions.
+    pub fn set_lumping(&mut self, on: bool) {
+        match (on, self.lumping.is_some()) {
+            (true, false) => self.lumping = Some(LumpingShift::new(self.mass.len())),
+            (false, true) => self.lumping = None,
+            _ => {}
+        }
     }
 
     /// Marks node `n` as written this step and returns its position in `active`.
@@ -190,6 +206,13 @@ impl<const D: usize> GridNodes<D> {
             self.velocity_old[n] = Vector::zeros();
             self.velocity[n] = Vector::zeros();
             self.touched[n] = false;
+            if let Some(l) = self.lumping.as_mut() {
+                l.mass[n] = 0.0;
+                l.momentum[n] = Vector::zeros();
+                l.body_force[n] = Vector::zeros();
+                l.body_force_shape[n] = Vector::zeros();
+                l.blend[n] = 1.0;
+            }
         }
         self.active.clear();
     }
@@ -201,6 +224,45 @@ impl<const D: usize> GridNodes<D> {
             && self.momentum.iter().all(|p| p.norm_squared() == 0.0)
             && self.force.iter().all(|f| f.norm_squared() == 0.0)
             && !self.touched.iter().any(|&t| t)
+    }
+}
+
+/// Per-node `Σ_p m_p (L_I − Ψ_I)` times 1, the mapped velocity and the body acceleration, and the
+/// body force `Σ_p m_p Ψ_I b_p` itself (kept apart from the internal force, which alone is
+/// limited at edge nodes).
+#[derive(Debug, Default, Clone)]
+pub struct LumpingShift<const D: usize> {
+    pub mass: Vec<f64>,
+    pub momentum: Vec<Vector<D>>,
+    pub body_force: Vec<Vector<D>>,
+    pub body_force_shape: Vec<Vector<D>>,
+    /// `θ` of each node, set by the first grid update of a step and reused by the second map of
+    /// MUSL.
+    pub blend: Vec<f64>,
+}
+
+impl<const D: usize> LumpingShift<D> {
+    fn new(n: usize) -> Self {
+        LumpingShift {
+            mass: vec![0.0; n],
+            momentum: vec![Vector::zeros(); n],
+            body_force: vec![Vector::zeros(); n],
+            body_force_shape: vec![Vector::zeros(); n],
+            blend: vec![1.0; n],
+        }
+    }
+
+    /// Weight `θ ∈ [0, 1]` of the shape-function lumping at a node with lumped masses
+    /// `m_Ψ = Σ m_p Ψ_I` and `m_L = Σ m_p L_I`: 1 where `m_Ψ ≥ 3/4 m_L` (inside a body, where
+    /// both are close to `ρ h^d`), 0 where `m_Ψ ≤ 1/4 m_L` (a node that barely overlaps the body,
+    /// where `m_Ψ` can be tiny or negative), a smooth step between.
+    #[inline]
+    pub fn blend(mass_shape: f64, mass_lumping: f64) -> f64 {
+        if mass_lumping <= 0.0 {
+            return 1.0;
+        }
+        let s = ((mass_shape / mass_lumping - 0.25) / 0.5).clamp(0.0, 1.0);
+        s * s * (3.0 - 2.0 * s)
     }
 }
 

@@ -264,7 +264,11 @@ fn column_study(
         order: 1,
         support: 2.0,
     };
-    let cases: [(&str, Shape, Integration); 5] = [
+    let rk2 = Shape::Rk {
+        order: 2,
+        support: 3.0,
+    };
+    let cases: [(&str, Shape, Integration); 7] = [
         (
             "linear (standard MPM)",
             Shape::Linear,
@@ -274,6 +278,8 @@ fn column_study(
         ("B-spline 3", Shape::BSpline3, Integration::MaterialPoint),
         ("RK1", rk1, Integration::MaterialPoint),
         ("RK1 + VC1", rk1, Integration::Vc { order: 1 }),
+        ("RK2", rk2, Integration::MaterialPoint),
+        ("RK2 + VC2", rk2, Integration::Vc { order: 2 }),
     ];
     writeln!(
         md,

@@ -25,6 +25,11 @@ use crate::shape::{Monomials, Stencils};
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
 
+/// A node's order-`n` correction needs its particle moment matrix `A_I = Σ V_p Q Qᵀ` to be well
+/// conditioned; below this smallest-to-largest eigenvalue ratio (a node whose support holds only
+/// a thin sliver of the body) the node gets the order-1 (constant) correction only.
+pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
+
 /// The per-node gradient corrections of one step.
 #[derive(Debug, Clone)]
 pub struct VcCorrection<const D: usize> {
@@ -148,10 +153,10 @@ impl<const D: usize> VcCorrection<D> {
             let a = DMatrix::from_row_slice(m, m, &self.moment[slot * m * m..(slot + 1) * m * m]);
             let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
             // A moment matrix whose particles lie (nearly) on a lower-dimensional set cannot
-            // carry the higher constraints: relative smallest eigenvalue below 1e-8.
+            // carry the higher constraints: relative smallest eigenvalue below [`VC_MIN_RELATIVE_EIGENVALUE`].
             let well_posed = m > 1 && {
                 let eig = a.clone().symmetric_eigenvalues();
-                eig.min() > 1e-8 * eig.max()
+                eig.min() > VC_MIN_RELATIVE_EIGENVALUE * eig.max()
             };
             let chol = if well_posed {
                 a.clone().cholesky()

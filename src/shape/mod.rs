@@ -59,6 +59,19 @@ pub trait ShapeFunction<const D: usize>: Send + Sync {
     fn apic_inertia(&self, cell_size: f64) -> Option<f64>;
     /// Polynomial degree the shape function reproduces.
     fn reproduction_order(&self) -> u32;
+    /// Whether `Ψ_I` takes negative values somewhere (RK of order ≥ 2). The lumped mass
+    /// `Σ_p m_p Ψ_I(x_p)` of a node that barely overlaps a body can then be negative or tiny, and
+    /// the step blends in [`ShapeFunction::lumping_weights`] there (METHOD.md section 1, and
+    /// `docs/convergence/FINDINGS.md`).
+    fn is_signed(&self) -> bool {
+        false
+    }
+    /// Nonnegative partition-of-unity weights on the stencil of `evaluate` (same node order), used
+    /// for the lumped mass, momentum and body force of nodes at the edge of a body when the shape
+    /// function is signed. Only called when [`ShapeFunction::is_signed`] is true.
+    fn lumping_weights(&self, _grid: &Grid<D>, _x: &Vector<D>, _weights: &mut [f64]) {
+        unreachable!("only signed shape functions have lumping weights")
+    }
     /// Fills `nodes`, `values` and `gradients` (each `stencil_len()` long) for a point `x` inside
     /// the domain of `grid`.
     fn evaluate(
@@ -78,6 +91,9 @@ pub struct Stencils<const D: usize> {
     pub nodes: Vec<usize>,
     pub values: Vec<f64>,
     pub gradients: Vec<Vector<D>>,
+    /// Nonnegative lumping weights (same layout as `values`), only for signed shape functions;
+    /// empty otherwise.
+    pub lumping: Vec<f64>,
 }
 
 impl<const D: usize> Stencils<D> {
@@ -95,6 +111,21 @@ impl<const D: usize> Stencils<D> {
             .zip(self.gradients.par_chunks_mut(len))
             .zip(x.par_iter())
             .for_each(|(((n, w), g), xp)| shape.evaluate(grid, xp, n, w, g));
+        if shape.is_signed() {
+            self.lumping.resize(total, 0.0);
+            self.lumping
+                .par_chunks_mut(len)
+                .zip(x.par_iter())
+                .for_each(|(l, xp)| shape.lumping_weights(grid, xp, l));
+        } else {
+            self.lumping.clear();
+        }
+    }
+
+    /// The lumping weights of particle `p`, when the shape function is signed.
+    #[inline]
+    pub fn lumping_of(&self, p: usize) -> Option<&[f64]> {
+        (!self.lumping.is_empty()).then(|| &self.lumping[p * self.len..(p + 1) * self.len])
     }
 
     /// The stencil of particle `p`: node indices, values, gradients.

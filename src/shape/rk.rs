@@ -50,6 +50,8 @@ pub struct ReproducingKernel<const D: usize> {
     basis: Monomials<D>,
     /// Nodes per axis in the stencil.
     width: usize,
+    /// Whether `Ψ_I` is negative somewhere (measured once in `new`).
+    signed: bool,
 }
 
 impl<const D: usize> ReproducingKernel<D> {
@@ -72,6 +74,7 @@ impl<const D: usize> ReproducingKernel<D> {
             support,
             basis: Monomials::up_to(order),
             width: (2.0 * support).ceil() as usize + 1,
+            signed: false,
         };
         let worst = rk.worst_condition();
         if worst.is_nan() || worst > MAX_CONDITION {
@@ -80,7 +83,34 @@ impl<const D: usize> ReproducingKernel<D> {
                 (order as f64 + 1.0) / 2.0 + 0.5
             )));
         }
-        Ok(rk)
+        let signed = rk.most_negative_value() < -1e-12;
+        Ok(ReproducingKernel { signed, ..rk })
+    }
+
+    /// The most negative `Ψ_I` over a lattice of points in one cell (the node set is a full
+    /// lattice, so this holds everywhere in the domain).
+    fn most_negative_value(&self) -> f64 {
+        let samples = 8usize;
+        let mut grid = Grid::<D>::new(Vector::<D>::zeros(), [1; D], 1.0).expect("unit grid");
+        grid.set_ghost_layers(self.ghost_layers()).expect("ghosts");
+        let len = self.stencil_len();
+        let (mut n, mut w, mut g) = (
+            vec![0; len],
+            vec![0.0; len],
+            vec![Vector::<D>::zeros(); len],
+        );
+        let mut lowest: f64 = 0.0;
+        for k in 0..samples.pow(D as u32) {
+            let mut r = k;
+            let x = Vector::<D>::from_fn(|_, _| {
+                let t = (r % samples) as f64 / samples as f64;
+                r /= samples;
+                t
+            });
+            self.evaluate(&grid, &x, &mut n, &mut w, &mut g);
+            lowest = w.iter().copied().fold(lowest, f64::min);
+        }
+        lowest
     }
 
     /// Number of basis monomials.
@@ -195,6 +225,23 @@ impl<const D: usize> ShapeFunction<D> for ReproducingKernel<D> {
 
     fn reproduction_order(&self) -> u32 {
         self.order
+    }
+
+    fn is_signed(&self) -> bool {
+        self.signed
+    }
+
+    /// The Shepard functions of the kernel, `φ_I / Σ_J φ_J`: positive, a partition of unity.
+    fn lumping_weights(&self, grid: &Grid<D>, x: &Vector<D>, weights: &mut [f64]) {
+        let xi = grid.to_cell_units(x);
+        let mut s = 0;
+        self.for_each_node(&xi, |_, _, phi, _| {
+            weights[s] = phi;
+            s += 1;
+        });
+        weights[s..].fill(0.0);
+        let total: f64 = weights.iter().sum();
+        weights.iter_mut().for_each(|w| *w /= total);
     }
 
     fn evaluate(

@@ -149,6 +149,7 @@ impl<const D: usize> Sim<D> {
         let grid = &self.grid;
         let ps = &self.particles;
         let work = &mut self.work;
+        work.nodes.set_lumping(self.shape.is_signed());
         if work.nodes.mass.len() != grid.node_count() {
             work.nodes.resize(grid);
         }
@@ -256,6 +257,9 @@ impl<const D: usize> Sim<D> {
             // those grid velocities.
             for &n in &work.nodes.active {
                 work.nodes.momentum[n] = Vector::zeros();
+                if let Some(l) = work.nodes.lumping.as_mut() {
+                    l.momentum[n] = Vector::zeros();
+                }
             }
             let velocity = |p: usize| updates[p].velocity;
             let affine = |p: usize| updates[p].affine;

@@ -1,5 +1,9 @@
 //! Particle to grid: `m_I = Σ m_p Ψ_Ip`, `(mv)_I = Σ m_p Ψ_Ip (v_p + C_p (x_I − x_p))`,
 //! `f_I = −Σ V_p σ_p ∇Ψ_Ip + Σ m_p Ψ_Ip b_p`.
+//!
+//! For a signed shape function (RK of order ≥ 2) the same sums with the nonnegative lumping
+//! weights `L_I` are kept as shifts `Σ m_p (L_Ip − Ψ_Ip)(1, v_p, b_p)`, which the grid update
+//! blends in at nodes that barely overlap a body.
 
 use crate::grid::{Grid, GridNodes};
 use crate::integration::VcCorrection;
@@ -35,6 +39,7 @@ pub fn particle_to_grid<const D: usize>(
 ) {
     for p in 0..ps.len() {
         let (ns, ws, gs) = stencils.of(p);
+        let lumping = stencils.lumping_of(p);
         let m = ps.mass[p];
         let v = velocity(p);
         let c = affine.map(|a| a(p));
@@ -49,7 +54,8 @@ pub fn particle_to_grid<const D: usize>(
         });
         for s in 0..ns.len() {
             let (n, w) = (ns[s], ws[s]);
-            if w == 0.0 && gs[s] == Vector::<D>::zeros() {
+            let shift = lumping.map_or(0.0, |l| l[s] - w);
+            if w == 0.0 && shift == 0.0 && gs[s] == Vector::<D>::zeros() {
                 continue;
             }
             nodes.touch(n);
@@ -58,13 +64,24 @@ pub fn particle_to_grid<const D: usize>(
                 mv += c * (grid.node_position(grid.node_multi_index(n)) - xp);
             }
             nodes.momentum[n] += (m * w) * mv;
+            if let Some(l) = nodes.lumping.as_mut() {
+                l.momentum[n] += (m * shift) * mv;
+                if let Some((_, b)) = force {
+                    l.mass[n] += m * shift;
+                    l.body_force[n] += (m * shift) * b;
+                    l.body_force_shape[n] += (m * w) * b;
+                }
+            }
             if let Some((vs, b)) = force {
                 let grad = match vc {
                     Some(vc) => gs[s] + vc.gradient_correction(grid, nodes, n, &xp),
                     None => gs[s],
                 };
                 nodes.mass[n] += m * w;
-                nodes.force[n] += vs * grad + (m * w) * b;
+                nodes.force[n] += vs * grad;
+                if nodes.lumping.is_none() {
+                    nodes.force[n] += (m * w) * b;
+                }
             }
         }
     }
