@@ -93,6 +93,15 @@ typedef enum RkmpmStatus {
 } RkmpmStatus;
 
 /**
+ * Measured laws for true 2D columns of aluminium rods, Nguyen, Bui & Fukagawa (2015), "Failure
+ * mechanism of true 2D granular flows" (J. Chem. Eng. Japan 48(6); arXiv:1512.05180), with
+ * `a = H0 / L0`: for `a ≥ 0.65`, `H0 / H∞ = 1.42 a^(2/3)`; run-out
+ * `(L∞ − L0) / L0 = 3.25 a^0.96` for `0.65 ≤ a ≤ 1.5` and `3.80 a^0.73` for `a ≥ 1.5`; for
+ * `a < 0.65` the top of the column is not reached (`H∞ = H0`).
+ */
+typedef struct PowerLaws PowerLaws;
+
+/**
  * A simulation. Created by `rkmpm_sim_new`, owned by the caller, released by `rkmpm_sim_free`.
  * One thread at a time may use a simulation; different simulations are independent.
  */
@@ -261,9 +270,16 @@ typedef uint32_t RkmpmField;
  */
 #define RKMPM_FIELD_DEFORMATION_GRADIENT 8
 
+/**
+ * 1 value: equivalent plastic strain (0 for elastic materials).
+ */
+#define RKMPM_FIELD_PLASTIC_STRAIN 9
+
 #define RkmpmStatus_ALL { RKMPM_OK, RKMPM_ERR_NULL_POINTER, RKMPM_ERR_INVALID_ARGUMENT, RKMPM_ERR_BUFFER_TOO_SMALL, RKMPM_ERR_INVALID_STATE, RKMPM_ERR_UNKNOWN_MATERIAL, RKMPM_ERR_OUTSIDE_GRID, RKMPM_ERR_UNSTABLE_TIME_STEP, RKMPM_ERR_NON_FINITE, RKMPM_ERR_INVERTED_PARTICLE, RKMPM_ERR_CALLBACK, RKMPM_ERR_IO, RKMPM_ERR_UNSUPPORTED, RKMPM_ERR_PANIC, }
 
 
+
+#define NGUYEN_BUI_FUKAGAWA PowerLaws
 
 #ifdef __cplusplus
 extern "C" {
@@ -426,6 +442,25 @@ enum RkmpmStatus rkmpm_sim_add_material_neo_hookean(struct RkmpmSim *sim,
                                                     double young,
                                                     double poisson,
                                                     uint32_t *out_id);
+
+/**
+ * Adds a Drucker–Prager soil (Hencky elasticity, return mapping with apex, non-associated
+ * flow, fitted to Mohr–Coulomb in plane strain): `density`, `young` > 0, `poisson` in (-1, 0.5),
+ * `friction_angle` in [0, 90) degrees, `cohesion` >= 0 (Pa, not both zero with the friction),
+ * `dilatancy_angle` in [0, friction_angle] degrees. Its particles carry the field
+ * `RKMPM_FIELD_PLASTIC_STRAIN`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_id` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_add_material_drucker_prager(struct RkmpmSim *sim,
+                                                       double density,
+                                                       double young,
+                                                       double poisson,
+                                                       double friction_angle,
+                                                       double cohesion,
+                                                       double dilatancy_angle,
+                                                       uint32_t *out_id);
 
 /**
  * Adds `count` particles of `material`: `positions` (`count * dim`, inside the grid),

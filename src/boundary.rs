@@ -214,18 +214,29 @@ impl<const D: usize> Walls<D> {
         }
     }
 
-    /// Moves boundary points that round-off put just beyond a fixed or slip wall back onto it.
-    pub fn clamp_to_walls(&self, grid: &Grid<D>, points: &mut [crate::step::BoundaryUpdate<D>]) {
+    /// Moves a point that the step put just beyond a wall (fixed, slip or friction) back onto
+    /// its face: the grid velocity has no normal component into the wall on the face, but a
+    /// point near it also feels the nodes above, and round-off or that blend may carry it a
+    /// hair past the face. Free faces leave points alone (leaving the grid is then an error).
+    pub fn clamp_to_walls(&self, grid: &Grid<D>, x: &mut Vector<D>) {
         let up = grid.upper();
-        for (axis, side, _) in self.mirrored_faces() {
-            for u in points.iter_mut() {
-                let x = &mut u.position[axis];
+        for axis in 0..D {
+            for side in [Side::Low, Side::High] {
+                if self.faces[axis][side as usize] == Boundary::Free {
+                    continue;
+                }
+                let c = &mut x[axis];
                 match side {
-                    Side::Low => *x = x.max(grid.origin[axis]),
-                    Side::High => *x = x.min(up[axis]),
+                    Side::Low => *c = c.max(grid.origin[axis]),
+                    Side::High => *c = c.min(up[axis]),
                 }
             }
         }
+    }
+
+    /// Whether any face is a wall.
+    pub fn any_wall(&self) -> bool {
+        self.faces.iter().flatten().any(|b| *b != Boundary::Free)
     }
 
     /// Applies the friction walls to the updated node velocities.

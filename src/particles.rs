@@ -1,5 +1,6 @@
 //! Material points, stored as a structure of arrays (one `Vec` per quantity).
 
+use crate::material::PlasticState;
 use crate::{Matrix, Vector};
 
 /// Per-particle quantities. All vectors have the same length (the particle count), except
@@ -24,6 +25,9 @@ pub struct Particles<const D: usize> {
     pub material: Vec<u32>,
     /// APIC affine velocity matrix `C_p` (empty under PIC/FLIP).
     pub affine: Vec<Matrix<D>>,
+    /// History of elastoplastic materials (`F_e`, plastic strain); empty until particles of a
+    /// history material are added, so elastic scenes carry none of it.
+    pub plastic: Vec<PlasticState>,
 }
 
 /// A particle quantity that can be read out, with its layout.
@@ -47,10 +51,12 @@ pub enum Field {
     ReferencePosition,
     /// `dim * dim` values per particle, row-major `F_p`.
     DeformationGradient,
+    /// One value per particle, equivalent plastic strain (0 for elastic materials).
+    PlasticStrain,
 }
 
 impl Field {
-    pub const ALL: [Field; 9] = [
+    pub const ALL: [Field; 10] = [
         Field::Position,
         Field::Velocity,
         Field::Displacement,
@@ -60,6 +66,7 @@ impl Field {
         Field::Mass,
         Field::ReferencePosition,
         Field::DeformationGradient,
+        Field::PlasticStrain,
     ];
 
     /// Values per particle in dimension `d`.
@@ -67,7 +74,7 @@ impl Field {
         match self {
             Field::Position | Field::Velocity | Field::Displacement | Field::ReferencePosition => d,
             Field::Stress | Field::DeformationGradient => d * d,
-            Field::Pressure | Field::Volume | Field::Mass => 1,
+            Field::Pressure | Field::Volume | Field::Mass | Field::PlasticStrain => 1,
         }
     }
 
@@ -83,6 +90,7 @@ impl Field {
             Field::Mass => "mass",
             Field::ReferencePosition => "reference_position",
             Field::DeformationGradient => "deformation_gradient",
+            Field::PlasticStrain => "plastic_strain",
         }
     }
 }
@@ -133,6 +141,11 @@ impl<const D: usize> Particles<D> {
             Field::Volume => {
                 for (p, o) in out.iter_mut().enumerate() {
                     *o = self.volume(p);
+                }
+            }
+            Field::PlasticStrain => {
+                for (p, o) in out.iter_mut().enumerate() {
+                    *o = self.plastic.get(p).map_or(0.0, |s| s.plastic_strain);
                 }
             }
         }

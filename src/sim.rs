@@ -328,6 +328,11 @@ impl<const D: usize> Sim<D> {
             .extend(std::iter::repeat_n(Matrix::<D>::zeros(), n));
         ps.pressure.extend(std::iter::repeat_n(0.0, n));
         ps.material.extend(std::iter::repeat_n(material, n));
+        // History (F_e, plastic strain) only once a history material has particles.
+        if !mat.is_elastic() || !ps.plastic.is_empty() {
+            ps.plastic
+                .resize(ps.position.len(), crate::material::PlasticState::default());
+        }
         if apic {
             ps.affine.resize(ps.position.len(), Matrix::<D>::zeros());
         }
@@ -387,7 +392,7 @@ impl<const D: usize> Sim<D> {
             .map(|p| {
                 let f = crate::material::embed3(&ps.deformation_gradient[p]);
                 ps.reference_volume[p]
-                    * self.materials[ps.material[p] as usize].strain_energy_density(&f)
+                    * self.materials[ps.material[p] as usize].stored_energy(&f, ps.plastic.get(p))
             })
             .sum()
     }

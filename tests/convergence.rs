@@ -126,7 +126,10 @@ fn column_with_free_surface_runs_with_rk2_vc2() {
             Transfer::PicFlip { flip: 0.0 },
         )
         .unwrap();
-    eprintln!("column RK2 + VC2, 32 cells: σ_yy error {:.3e}", run.stress_error);
+    eprintln!(
+        "column RK2 + VC2, 32 cells: σ_yy error {:.3e}",
+        run.stress_error
+    );
     assert!(run.stress_error < 0.02);
 }
 

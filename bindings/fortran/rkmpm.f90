@@ -86,6 +86,7 @@ module rkmpm
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_MASS = 6                  ! 1
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_REFERENCE_POSITION = 7    ! dim
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_DEFORMATION_GRADIENT = 8  ! dim*dim, row-major
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_PLASTIC_STRAIN = 9        ! 1, equivalent plastic strain
 
    ! Sides of a grid face (rkmpm_sim_set_boundary)
    integer(c_int32_t), parameter, public :: RKMPM_SIDE_LOW = -1
@@ -140,6 +141,7 @@ module rkmpm
       procedure :: set_body_force => sim_set_body_force
       procedure :: add_material_linear_elastic => sim_add_material_linear_elastic
       procedure :: add_material_neo_hookean => sim_add_material_neo_hookean
+      procedure :: add_material_drucker_prager => sim_add_material_drucker_prager
       procedure :: add_particles => sim_add_particles
       procedure :: add_boundary_points => sim_add_boundary_points
       procedure :: boundary_point_count => sim_boundary_point_count
@@ -302,6 +304,23 @@ module rkmpm
          real(c_double), value :: poisson
          integer(c_int32_t), intent(out) :: out_id
       end function rkmpm_sim_add_material_neo_hookean
+
+      ! enum RkmpmStatus rkmpm_sim_add_material_drucker_prager(struct RkmpmSim *sim, double density,
+      !     double young, double poisson, double friction_angle, double cohesion,
+      !     double dilatancy_angle, uint32_t *out_id);   /* angles in degrees */
+      integer(c_int) function rkmpm_sim_add_material_drucker_prager(sim, density, young, poisson, &
+            friction_angle, cohesion, dilatancy_angle, out_id) &
+         bind(C, name="rkmpm_sim_add_material_drucker_prager")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: density
+         real(c_double), value :: young
+         real(c_double), value :: poisson
+         real(c_double), value :: friction_angle
+         real(c_double), value :: cohesion
+         real(c_double), value :: dilatancy_angle
+         integer(c_int32_t), intent(out) :: out_id
+      end function rkmpm_sim_add_material_drucker_prager
 
       ! enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim, uint32_t material, size_t count,
       !                                          const double *positions, const double *volumes,
@@ -741,6 +760,24 @@ contains
       if (present(errmsg)) errmsg = text
       id = out_id
    end subroutine sim_add_material_neo_hookean
+
+   !> Adds a Drucker-Prager soil (angles in degrees, cohesion in Pa); see the C header.
+   subroutine sim_add_material_drucker_prager(self, density, young, poisson, friction_angle, &
+                                              cohesion, dilatancy_angle, id, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: density, young, poisson, friction_angle, cohesion, dilatancy_angle
+      integer(c_int32_t), intent(out) :: id
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: out_id
+      out_id = -1
+      call report(rkmpm_sim_add_material_drucker_prager(self%h, density, young, poisson, &
+                  friction_angle, cohesion, dilatancy_angle, out_id), &
+                  'add_material_drucker_prager', stat, text)
+      if (present(errmsg)) errmsg = text
+      id = out_id
+   end subroutine sim_add_material_drucker_prager
 
    !> Adds size(x, 2) particles of `material`: positions x(dim, n), volumes(n) and optional
    !> velocities(dim, n) (at rest when absent). All or nothing.

@@ -94,6 +94,8 @@ pub const RKMPM_FIELD_MASS: RkmpmField = 6;
 pub const RKMPM_FIELD_REFERENCE_POSITION: RkmpmField = 7;
 /// dim*dim values: deformation gradient, row-major.
 pub const RKMPM_FIELD_DEFORMATION_GRADIENT: RkmpmField = 8;
+/// 1 value: equivalent plastic strain (0 for elastic materials).
+pub const RKMPM_FIELD_PLASTIC_STRAIN: RkmpmField = 9;
 
 /// Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
 /// the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
@@ -541,6 +543,37 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_neo_hookean(
 ) -> RkmpmStatus {
     add_material("rkmpm_sim_add_material_neo_hookean", sim, out_id, || {
         Material::neo_hookean(density, young, poisson)
+    })
+}
+
+/// Adds a Drucker–Prager soil (Hencky elasticity, return mapping with apex, non-associated
+/// flow, fitted to Mohr–Coulomb in plane strain): `density`, `young` > 0, `poisson` in (-1, 0.5),
+/// `friction_angle` in [0, 90) degrees, `cohesion` >= 0 (Pa, not both zero with the friction),
+/// `dilatancy_angle` in [0, friction_angle] degrees. Its particles carry the field
+/// `RKMPM_FIELD_PLASTIC_STRAIN`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_id` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_material_drucker_prager(
+    sim: *mut RkmpmSim,
+    density: f64,
+    young: f64,
+    poisson: f64,
+    friction_angle: f64,
+    cohesion: f64,
+    dilatancy_angle: f64,
+    out_id: *mut u32,
+) -> RkmpmStatus {
+    add_material("rkmpm_sim_add_material_drucker_prager", sim, out_id, || {
+        Material::drucker_prager(
+            density,
+            young,
+            poisson,
+            friction_angle,
+            cohesion,
+            dilatancy_angle,
+        )
     })
 }
 

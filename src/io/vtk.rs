@@ -87,7 +87,12 @@ pub fn particles_vtu<const D: usize>(sim: &Sim<D>) -> String {
         pad3(&sim.field(Field::Displacement), D),
     );
     data_array(&mut s, "stress", 9, pad33(&sim.field(Field::Stress), D));
-    for f in [Field::Pressure, Field::Volume, Field::Mass] {
+    for f in [
+        Field::Pressure,
+        Field::Volume,
+        Field::Mass,
+        Field::PlasticStrain,
+    ] {
         data_array(&mut s, f.name(), 1, sim.field(f).into_iter());
     }
     data_array(&mut s, "material", 1, ps.material.iter().map(|&m| m as f64));

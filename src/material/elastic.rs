@@ -137,6 +137,7 @@ mod tests {
         for m in [
             Material::linear_elastic(1.0, 5.0, 0.3).unwrap(),
             Material::neo_hookean(1.0, 5.0, 0.3).unwrap(),
+            Material::drucker_prager(1.0, 5.0, 0.3, 30.0, 0.0, 0.0).unwrap(),
         ] {
             let mut p = Matrix3::zeros();
             let e = 1e-6;
@@ -155,7 +156,8 @@ mod tests {
                 Material::LinearElastic(_) => {
                     assert!((0.5 * (p + p.transpose()) - sigma).norm() < 1e-8)
                 }
-                Material::NeoHookean(_) => {
+                // Hencky (the elastic law of Drucker–Prager) is hyperelastic too.
+                Material::NeoHookean(_) | Material::DruckerPrager(_) => {
                     let j = f.determinant();
                     assert!((p * f.transpose() / j - sigma).norm() < 1e-8, "{m:?}");
                 }

@@ -6,8 +6,10 @@
 //! damage models will carry typed per-particle state.
 
 mod elastic;
+mod plastic;
 
 pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
+pub use plastic::{DruckerPrager, PlasticState};
 
 use crate::error::Result;
 use nalgebra::Matrix3;
@@ -33,6 +35,8 @@ pub enum Material {
     LinearElastic(LinearElastic),
     /// Compressible neo-Hookean, `σ = μ/J (F Fᵀ − I) + λ ln J / J I`.
     NeoHookean(NeoHookean),
+    /// Drucker–Prager soil (Hencky elasticity, non-associated flow, apex return).
+    DruckerPrager(DruckerPrager),
 }
 
 impl Material {
@@ -50,11 +54,78 @@ impl Material {
         )?)))
     }
 
+    /// Drucker–Prager soil: density, Young's modulus, Poisson's ratio, friction angle (degrees),
+    /// cohesion (Pa) and dilatancy angle (degrees, at most the friction angle).
+    pub fn drucker_prager(
+        density: f64,
+        young: f64,
+        poisson: f64,
+        friction_degrees: f64,
+        cohesion: f64,
+        dilatancy_degrees: f64,
+    ) -> Result<Self> {
+        Ok(Material::DruckerPrager(DruckerPrager::new(
+            ElasticConstants::new(density, young, poisson)?,
+            friction_degrees,
+            cohesion,
+            dilatancy_degrees,
+        )?))
+    }
+
     fn model(&self) -> &dyn Constitutive {
         match self {
             Material::LinearElastic(m) => m,
             Material::NeoHookean(m) => m,
+            Material::DruckerPrager(m) => m,
         }
+    }
+
+    /// The constitutive update of a history model: new state and Cauchy stress after the
+    /// increment `df = F^{n+1} (F^n)⁻¹`, for the new `det F = j`. Elastic models have no
+    /// history and never get here (the step calls [`Constitutive::cauchy_stress`]).
+    pub fn plastic_update(
+        &self,
+        state: &PlasticState,
+        df: &Matrix3<f64>,
+        j: f64,
+    ) -> (PlasticState, Matrix3<f64>) {
+        match self {
+            Material::DruckerPrager(m) => m.update(state, df, j),
+            Material::LinearElastic(_) | Material::NeoHookean(_) => {
+                unreachable!("elastic materials have no history")
+            }
+        }
+    }
+
+    /// Stored elastic energy per unit reference volume of a point with deformation `f` and, for
+    /// history models, state `state`.
+    pub fn stored_energy(&self, f: &Matrix3<f64>, state: Option<&PlasticState>) -> f64 {
+        match (self, state) {
+            (Material::DruckerPrager(m), Some(s)) => {
+                m.elastic_energy(&s.elastic_deformation) * f.determinant()
+                    / s.elastic_deformation.determinant()
+            }
+            _ => self.strain_energy_density(f),
+        }
+    }
+}
+
+impl Constitutive for DruckerPrager {
+    fn density(&self) -> f64 {
+        self.elastic.density
+    }
+    fn wave_speed(&self, _j: f64) -> f64 {
+        ((self.elastic.lambda + 2.0 * self.elastic.mu) / self.elastic.density).sqrt()
+    }
+    fn is_elastic(&self) -> bool {
+        false
+    }
+    /// The elastic (Hencky) stress of `f` taken as wholly elastic (no return mapping).
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        self.elastic_stress(f, f.determinant())
+    }
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
+        self.elastic_energy(f)
     }
 }
 

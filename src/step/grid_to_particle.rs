@@ -3,6 +3,7 @@
 use super::TransferPlan;
 use crate::error::ErrorKind;
 use crate::grid::{Grid, GridNodes};
+use crate::material::PlasticState;
 use crate::particles::Particles;
 use crate::shape::Stencils;
 use crate::{Matrix, Vector};
@@ -17,6 +18,8 @@ pub struct ParticleUpdate<const D: usize> {
     pub deformation_gradient: Matrix<D>,
     pub stress: Matrix<D>,
     pub pressure: f64,
+    /// New history of an elastoplastic particle (untouched for elastic ones).
+    pub plastic: PlasticState,
 }
 
 impl<const D: usize> Default for ParticleUpdate<D> {
@@ -28,6 +31,7 @@ impl<const D: usize> Default for ParticleUpdate<D> {
             deformation_gradient: Matrix::identity(),
             stress: Matrix::zeros(),
             pressure: 0.0,
+            plastic: PlasticState::default(),
         }
     }
 }

@@ -26,6 +26,7 @@ use crate::material::{block, embed3, pressure, Constitutive};
 use crate::shape::Stencils;
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
+use nalgebra::Matrix3;
 use rayon::prelude::*;
 
 /// Scratch space of a step, kept between steps so the hot loops do not allocate.
@@ -312,16 +313,39 @@ impl<const D: usize> Sim<D> {
             }));
         }
 
-        // 6. Constitutive update.
+        // 6. Constitutive update: elastic models from F, history models by return mapping
+        //    from their state and the increment ΔF = F^{n+1} (F^n)⁻¹.
         let materials = &self.materials;
         updates.par_iter_mut().enumerate().for_each(|(p, u)| {
-            if crate::determinant(&u.deformation_gradient) > 0.0 {
-                let s3 = materials[ps.material[p] as usize]
-                    .cauchy_stress(&embed3(&u.deformation_gradient));
-                u.stress = block(&s3);
-                u.pressure = pressure(&s3);
+            let j = crate::determinant(&u.deformation_gradient);
+            if j.is_nan() || j <= 0.0 {
+                // Inverted or not finite: the checks reject the step; no stress to compute.
+                u.stress = Matrix::zeros();
+                u.pressure = 0.0;
+                return;
             }
+            let material = &materials[ps.material[p] as usize];
+            let f = embed3(&u.deformation_gradient);
+            let s3 = if material.is_elastic() {
+                material.cauchy_stress(&f)
+            } else {
+                let f_old = embed3(&ps.deformation_gradient[p]);
+                let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
+                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j);
+                u.plastic = state;
+                s3
+            };
+            u.stress = block(&s3);
+            u.pressure = pressure(&s3);
         });
+
+        // Particles stay inside the walls (see `Walls::clamp_to_walls`).
+        let walls = &self.options.walls;
+        if walls.any_wall() {
+            updates
+                .par_iter_mut()
+                .for_each(|u| walls.clamp_to_walls(grid, &mut u.position));
+        }
 
         // Checks: the first bad particle (lowest index) is reported.
         let bad = updates
@@ -339,10 +363,10 @@ impl<const D: usize> Sim<D> {
             work.boundary_updates = boundary_updates;
             return Err(Error::new(kind, message));
         }
-        // Boundary points on a fixed or slip wall stay on it (round-off may not push them out).
-        self.options
-            .walls
-            .clamp_to_walls(grid, &mut boundary_updates);
+        // Boundary points on a wall stay on it (round-off may not push them out).
+        for u in boundary_updates.iter_mut() {
+            self.options.walls.clamp_to_walls(grid, &mut u.position);
+        }
         let bad = boundary_updates.iter().enumerate().find_map(|(b, u)| {
             let what = if !u
                 .position
@@ -386,6 +410,11 @@ impl<const D: usize> Sim<D> {
             ps.pressure[p] = u.pressure;
             if apic {
                 ps.affine[p] = u.affine;
+            }
+            if let Some(state) = ps.plastic.get_mut(p) {
+                if !self.materials[ps.material[p] as usize].is_elastic() {
+                    *state = u.plastic;
+                }
             }
         }
         self.work.updates = updates;

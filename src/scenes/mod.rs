@@ -194,3 +194,6 @@ pub fn run_vibrating_bar<const D: usize>(
         steps: sim.steps(),
     })
 }
+
+mod collapse;
+pub use collapse::{CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};

@@ -1,0 +1,339 @@
+//! Elastoplasticity in finite strain with per-particle history: Drucker–Prager for soils.
+//!
+//! Multiplicative split `F = F_e F_p`. The elastic response is Hencky's: with `F_e = U Σ Vᵀ` and
+//! the logarithmic principal strains `ε = ln Σ`, the Kirchhoff stress is
+//! `τ = U diag(λ tr ε + 2 μ ε) Uᵀ` and the Cauchy stress `σ = τ / J`. Each step takes the elastic
+//! predictor `F_e^tr = ΔF F_e^n` (`ΔF = F^{n+1} (F^n)⁻¹`) and returns the principal Kirchhoff
+//! stress to the yield surface. The elastic law is linear in `ε`, so for the linear
+//! Drucker–Prager surface the return is in closed form, apex included (de Souza Neto, Perić &
+//! Owen 2008, section 8.3; Bui et al. 2008 for the plane-strain fit to Mohr–Coulomb).
+
+use super::ElasticConstants;
+use crate::error::{check_finite, Error, Result};
+use nalgebra::{Matrix3, Vector3};
+
+/// History of one material point under an elastoplastic model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlasticState {
+    /// Elastic part `F_e` of the deformation gradient (3×3; plane strain keeps `F_33 = 1` for the
+    /// total `F`, not for `F_e`).
+    pub elastic_deformation: Matrix3<f64>,
+    /// Equivalent plastic strain `∫ sqrt(2/3 ‖dε_p‖²)`.
+    pub plastic_strain: f64,
+}
+
+impl Default for PlasticState {
+    fn default() -> Self {
+        PlasticState {
+            elastic_deformation: Matrix3::identity(),
+            plastic_strain: 0.0,
+        }
+    }
+}
+
+/// Drucker–Prager plasticity with a non-associated flow rule, fitted to Mohr–Coulomb in plane
+/// strain: yield `f = α_φ I1 + sqrt(J2) − k_c ≤ 0` on the Kirchhoff stress (tension positive),
+/// plastic potential `g = α_ψ I1 + sqrt(J2)`, with
+/// `α_φ = tan φ / sqrt(9 + 12 tan² φ)`, `k_c = 3 c / sqrt(9 + 12 tan² φ)` and `α_ψ` likewise
+/// from the dilatancy angle `ψ`. Perfectly plastic (no hardening). Stress states beyond the apex
+/// `I1 = k_c / α_φ` return to it: a cohesionless soil carries no tension.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DruckerPrager {
+    pub elastic: ElasticConstants,
+    /// Friction angle `φ` in radians.
+    pub friction: f64,
+    /// Cohesion `c` (Pa).
+    pub cohesion: f64,
+    /// Dilatancy angle `ψ` in radians (`0 ≤ ψ ≤ φ`; `ψ = φ` is associated flow).
+    pub dilatancy: f64,
+    alpha_friction: f64,
+    alpha_dilatancy: f64,
+    k_cohesion: f64,
+}
+
+fn mohr_coulomb_fit(angle: f64) -> (f64, f64) {
+    let t = angle.tan();
+    let r = (9.0 + 12.0 * t * t).sqrt();
+    (t / r, 3.0 / r)
+}
+
+impl DruckerPrager {
+    /// Angles in degrees. Fails unless `0 ≤ φ < 90°`, `0 ≤ ψ ≤ φ` and `c ≥ 0`, all finite.
+    pub fn new(
+        elastic: ElasticConstants,
+        friction_degrees: f64,
+        cohesion: f64,
+        dilatancy_degrees: f64,
+    ) -> Result<Self> {
+        check_finite("friction_angle", friction_degrees)?;
+        check_finite("cohesion", cohesion)?;
+        check_finite("dilatancy_angle", dilatancy_degrees)?;
+        if !(0.0..90.0).contains(&friction_degrees) {
+            return Err(Error::invalid(format!(
+                "friction_angle must lie in [0, 90) degrees, got {friction_degrees}"
+            )));
+        }
+        if !(0.0..=friction_degrees).contains(&dilatancy_degrees) {
+            return Err(Error::invalid(format!(
+                "dilatancy_angle must lie in [0, friction_angle = {friction_degrees}] degrees, got {dilatancy_degrees}"
+            )));
+        }
+        if cohesion < 0.0 {
+            return Err(Error::invalid(format!(
+                "cohesion must be >= 0, got {cohesion}"
+            )));
+        }
+        if friction_degrees == 0.0 && cohesion == 0.0 {
+            return Err(Error::invalid(
+                "friction_angle and cohesion are both zero: the material has no strength",
+            ));
+        }
+        let (friction, dilatancy) = (
+            friction_degrees.to_radians(),
+            dilatancy_degrees.to_radians(),
+        );
+        let (alpha_friction, k) = mohr_coulomb_fit(friction);
+        let (alpha_dilatancy, _) = mohr_coulomb_fit(dilatancy);
+        Ok(DruckerPrager {
+            elastic,
+            friction,
+            cohesion,
+            dilatancy,
+            alpha_friction,
+            alpha_dilatancy,
+            k_cohesion: k * cohesion,
+        })
+    }
+
+    /// The yield function `α_φ I1 + sqrt(J2) − k_c` of a principal Kirchhoff stress.
+    pub fn yield_function(&self, tau: &Vector3<f64>) -> f64 {
+        let i1 = tau.sum();
+        let s = tau - Vector3::repeat(i1 / 3.0);
+        self.alpha_friction * i1 + (0.5 * s.norm_squared()).sqrt() - self.k_cohesion
+    }
+
+    /// Principal Kirchhoff stress of principal logarithmic strains.
+    pub fn principal_stress(&self, eps: &Vector3<f64>) -> Vector3<f64> {
+        let (l, m) = (self.elastic.lambda, self.elastic.mu);
+        Vector3::repeat(l * eps.sum()) + 2.0 * m * eps
+    }
+
+    /// Returns the trial principal strains `eps` to the yield surface: the new principal strains.
+    pub fn return_map(&self, eps: &Vector3<f64>) -> Vector3<f64> {
+        let (m, k) = (
+            self.elastic.mu,
+            self.elastic.lambda + 2.0 / 3.0 * self.elastic.mu,
+        );
+        let tau = self.principal_stress(eps);
+        let f = self.yield_function(&tau);
+        // Relative tolerance against the stress scale: round-off of τ is ~1e-16 E ‖ε‖.
+        if f <= 1e-14 * self.elastic.young * (1.0 + eps.norm()) {
+            return *eps;
+        }
+        let i1 = tau.sum();
+        let s = tau - Vector3::repeat(i1 / 3.0);
+        let sqrt_j2 = (0.5 * s.norm_squared()).sqrt();
+        let gamma = f / (9.0 * k * self.alpha_friction * self.alpha_dilatancy + m);
+        let sqrt_j2_new = sqrt_j2 - m * gamma;
+        let (i1_new, s_new) = if sqrt_j2_new >= 0.0 {
+            let scale = if sqrt_j2 > 0.0 {
+                sqrt_j2_new / sqrt_j2
+            } else {
+                0.0
+            };
+            (i1 - 9.0 * k * self.alpha_dilatancy * gamma, s * scale)
+        } else {
+            // Apex (α_φ > 0 here: for φ = 0 the smooth return always lands at sqrt(J2) = k_c).
+            (self.k_cohesion / self.alpha_friction, Vector3::zeros())
+        };
+        s_new / (2.0 * m) + Vector3::repeat(i1_new / (9.0 * k))
+    }
+
+    /// One constitutive update: the new state and Cauchy stress after the increment `df`, for a
+    /// total `det F = j`.
+    pub fn update(
+        &self,
+        state: &PlasticState,
+        df: &Matrix3<f64>,
+        j: f64,
+    ) -> (PlasticState, Matrix3<f64>) {
+        let fe = df * state.elastic_deformation;
+        let svd = fe.svd(true, true);
+        let (u, vt) = (svd.u.expect("U"), svd.v_t.expect("Vᵀ"));
+        let eps = svd.singular_values.map(|s| s.ln());
+        let eps_new = self.return_map(&eps);
+        let tau = self.principal_stress(&eps_new);
+        let fe_new = u * Matrix3::from_diagonal(&eps_new.map(f64::exp)) * vt;
+        let plastic = (2.0f64 / 3.0).sqrt() * (eps - eps_new).norm();
+        let sigma = u * Matrix3::from_diagonal(&tau) * u.transpose() / j;
+        (
+            PlasticState {
+                elastic_deformation: fe_new,
+                plastic_strain: state.plastic_strain + plastic,
+            },
+            sigma,
+        )
+    }
+
+    /// Hencky Cauchy stress `U diag(λ tr ε + 2 μ ε) Uᵀ / j` of an elastic deformation `fe`.
+    pub fn elastic_stress(&self, fe: &Matrix3<f64>, j: f64) -> Matrix3<f64> {
+        let svd = fe.svd(true, false);
+        let u = svd.u.expect("U");
+        let tau = self.principal_stress(&svd.singular_values.map(|s| s.ln()));
+        u * Matrix3::from_diagonal(&tau) * u.transpose() / j
+    }
+
+    /// Hencky energy of the elastic part `F_e` per unit reference volume.
+    pub fn elastic_energy(&self, fe: &Matrix3<f64>) -> f64 {
+        let eps = fe.svd(false, false).singular_values.map(|s| s.ln());
+        0.5 * self.elastic.lambda * eps.sum().powi(2) + self.elastic.mu * eps.norm_squared()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shape::UniformRng;
+
+    fn sand() -> DruckerPrager {
+        DruckerPrager::new(
+            ElasticConstants::new(2650.0, 8.4e5, 0.3).unwrap(),
+            20.0,
+            0.0,
+            0.0,
+        )
+        .unwrap()
+    }
+
+    fn random_strain(rng: &mut UniformRng, size: f64) -> Vector3<f64> {
+        Vector3::from_fn(|_, _| size * (2.0 * rng.uniform() - 1.0))
+    }
+
+    /// After the return no stress lies outside the yield surface (to round-off), a stress inside
+    /// it is left alone, and a returned stress returns to itself.
+    #[test]
+    fn return_map_lands_on_the_yield_surface() {
+        let mut rng = UniformRng::new(3);
+        for dp in [
+            sand(),
+            DruckerPrager::new(
+                ElasticConstants::new(2000.0, 1e7, 0.25).unwrap(),
+                30.0,
+                5e3,
+                10.0,
+            )
+            .unwrap(),
+            DruckerPrager::new(
+                ElasticConstants::new(2000.0, 1e7, 0.25).unwrap(),
+                35.0,
+                0.0,
+                35.0,
+            )
+            .unwrap(),
+            DruckerPrager::new(
+                ElasticConstants::new(2000.0, 1e7, 0.25).unwrap(),
+                0.0,
+                1e4,
+                0.0,
+            )
+            .unwrap(),
+        ] {
+            let scale = dp.elastic.young;
+            let (mut plastic, mut elastic) = (0, 0);
+            for _ in 0..2000 {
+                // Sizes from 5e-6 to 5e-2 (log-uniform), elastic and plastic states alike.
+                let size = 0.05 * 10f64.powf(-4.0 * rng.uniform());
+                let eps = random_strain(&mut rng, size);
+                let f_trial = dp.yield_function(&dp.principal_stress(&eps));
+                let back = dp.return_map(&eps);
+                let f = dp.yield_function(&dp.principal_stress(&back));
+                assert!(f <= 1e-12 * scale, "{dp:?}: f = {f} after return");
+                if f_trial <= 0.0 {
+                    elastic += 1;
+                    assert_eq!(back, eps);
+                } else {
+                    plastic += 1;
+                    assert!(f.abs() <= 1e-10 * scale, "not on the surface: {f}");
+                    let again = dp.return_map(&back);
+                    assert!((again - back).norm() <= 1e-14, "return is not idempotent");
+                }
+            }
+            assert!(
+                plastic > 100 && elastic > 100,
+                "{plastic} plastic, {elastic} elastic"
+            );
+        }
+    }
+
+    /// The plastic strain increment follows the potential `g`:
+    /// `Δε_p = Δγ (α_ψ I + s / (2 sqrt(J2)))`, so `tr Δε_p = 3 α_ψ Δγ` and
+    /// `‖dev Δε_p‖ = Δγ / sqrt(2)`. Zero dilatancy: no plastic volume change; ψ = φ: associated.
+    #[test]
+    fn flow_is_non_associated_with_the_dilatancy_angle() {
+        let e = ElasticConstants::new(2000.0, 1e7, 0.25).unwrap();
+        for psi in [0.0, 10.0, 30.0] {
+            let dp = DruckerPrager::new(e, 30.0, 2e4, psi).unwrap();
+            // A deviatoric trial strain under some compression: smooth-cone return.
+            let eps = Vector3::new(-0.01, 0.004, -0.001);
+            let back = dp.return_map(&eps);
+            let dep = eps - back;
+            let gamma = (2.0f64).sqrt() * (dep - Vector3::repeat(dep.sum() / 3.0)).norm();
+            let (alpha_psi, _) = mohr_coulomb_fit(psi.to_radians());
+            assert!(gamma > 1e-4, "expected plastic flow");
+            assert!(
+                (dep.sum() - 3.0 * alpha_psi * gamma).abs() < 1e-12,
+                "ψ = {psi}: tr Δε_p = {}, 3 α_ψ Δγ = {}",
+                dep.sum(),
+                3.0 * alpha_psi * gamma
+            );
+        }
+    }
+
+    /// Tension beyond the apex of a cohesionless soil returns to zero stress; with cohesion, to the
+    /// apex `I1 = k_c / α_φ` with no deviator.
+    #[test]
+    fn apex_return() {
+        let eps = Vector3::new(0.01, 0.012, 0.008);
+        let back = sand().return_map(&eps);
+        assert!(sand().principal_stress(&back).norm() < 1e-9);
+        let e = ElasticConstants::new(2000.0, 1e7, 0.25).unwrap();
+        let dp = DruckerPrager::new(e, 30.0, 1e4, 5.0).unwrap();
+        let tau = dp.principal_stress(&dp.return_map(&eps));
+        let i1 = tau.sum();
+        assert!((i1 - dp.k_cohesion / dp.alpha_friction).abs() < 1e-9 * i1.abs());
+        assert!((tau - Vector3::repeat(i1 / 3.0)).norm() < 1e-9 * i1.abs());
+    }
+
+    /// A full update under a rotation leaves the stress rotated (objectivity) and the plastic
+    /// strain unchanged; uniaxial compression of sand yields and stays on the surface.
+    #[test]
+    fn update_is_objective_and_accumulates_plastic_strain() {
+        let dp = sand();
+        let mut state = PlasticState::default();
+        let df = Matrix3::from_diagonal(&Vector3::new(0.995, 1.0, 1.0));
+        let mut j = 1.0;
+        let mut sigma = Matrix3::zeros();
+        for _ in 0..20 {
+            j *= 0.995;
+            (state, sigma) = dp.update(&state, &df, j);
+        }
+        assert!(state.plastic_strain > 0.0);
+        let eig = (sigma * j).symmetric_eigenvalues();
+        assert!(dp.yield_function(&eig) <= 1e-9 * dp.elastic.young);
+        let r = nalgebra::Rotation3::from_euler_angles(0.4, -0.2, 0.9).into_inner();
+        let (rotated, sigma_r) = dp.update(&state, &r, j);
+        assert!((sigma_r - r * sigma * r.transpose()).norm() < 1e-9 * sigma.norm());
+        assert_eq!(rotated.plastic_strain, state.plastic_strain);
+    }
+
+    #[test]
+    fn rejects_bad_parameters() {
+        let e = ElasticConstants::new(2000.0, 1e7, 0.25).unwrap();
+        assert!(DruckerPrager::new(e, 30.0, 0.0, 31.0).is_err());
+        assert!(DruckerPrager::new(e, -1.0, 0.0, 0.0).is_err());
+        assert!(DruckerPrager::new(e, 90.0, 0.0, 0.0).is_err());
+        assert!(DruckerPrager::new(e, 30.0, -1.0, 0.0).is_err());
+        assert!(DruckerPrager::new(e, 30.0, f64::NAN, 0.0).is_err());
+        assert!(DruckerPrager::new(e, 0.0, 0.0, 0.0).is_err());
+    }
+}

@@ -1,0 +1,199 @@
+//! Plane-strain collapse of a granular column (aluminium-rod-like material) against a wall, and
+//! the power laws measured for true two-dimensional columns.
+
+use crate::boundary::{Boundary, Side};
+use crate::error::{Error, Result};
+use crate::material::Material;
+use crate::shape::Shape;
+use crate::sim::{Integration, Sim, Transfer};
+use crate::Vector;
+
+/// Measured laws for true 2D columns of aluminium rods, Nguyen, Bui & Fukagawa (2015), "Failure
+/// mechanism of true 2D granular flows" (J. Chem. Eng. Japan 48(6); arXiv:1512.05180), with
+/// `a = H0 / L0`: for `a ≥ 0.65`, `H0 / H∞ = 1.42 a^(2/3)`; run-out
+/// `(L∞ − L0) / L0 = 3.25 a^0.96` for `0.65 ≤ a ≤ 1.5` and `3.80 a^0.73` for `a ≥ 1.5`; for
+/// `a < 0.65` the top of the column is not reached (`H∞ = H0`).
+pub struct PowerLaws;
+
+pub const NGUYEN_BUI_FUKAGAWA: PowerLaws = PowerLaws;
+
+impl PowerLaws {
+    /// `(L∞ − L0) / L0` at aspect ratio `a` (`None` below 0.65, where no law was fitted).
+    pub fn runout(&self, a: f64) -> Option<f64> {
+        if a < 0.65 {
+            None
+        } else if a <= 1.5 {
+            Some(3.25 * a.powf(0.96))
+        } else {
+            Some(3.80 * a.powf(0.73))
+        }
+    }
+
+    /// `H∞ / L0` at aspect ratio `a`.
+    pub fn final_height(&self, a: f64) -> f64 {
+        if a < 0.65 {
+            a
+        } else {
+            a / (1.42 * a.powf(2.0 / 3.0))
+        }
+    }
+}
+
+/// A column `L0` wide and `a L0` high, standing on a floor against a smooth (slip) wall at
+/// `x = 0`, released at rest under gravity. Drucker–Prager with the rods' parameters as the SPH
+/// and MPM studies of Bui et al. (2008) use them: ρ = 2650 kg/m³, E = 0.84 MPa, ν = 0.3, φ = 19.8°,
+/// no cohesion, no dilatancy. The floor is a Coulomb friction wall with `μ = tan φ`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GranularColumn {
+    /// Initial width `L0` (m).
+    pub width: f64,
+    /// Aspect ratio `a = H0 / L0`.
+    pub aspect: f64,
+    /// Cells across `L0`.
+    pub cells_across: usize,
+    pub density: f64,
+    pub young: f64,
+    pub poisson: f64,
+    pub friction_degrees: f64,
+    pub dilatancy_degrees: f64,
+    pub cohesion: f64,
+    pub floor_friction: f64,
+    pub gravity: f64,
+    /// Simulated time, in units of `sqrt(H0 / g)` (the flow stops after about 3–4).
+    pub duration: f64,
+    pub shape: Shape,
+    pub integration: Integration,
+    pub transfer: Transfer,
+}
+
+impl Default for GranularColumn {
+    fn default() -> Self {
+        let friction = 19.8f64;
+        GranularColumn {
+            width: 0.1,
+            aspect: 1.0,
+            cells_across: 16,
+            density: 2650.0,
+            young: 0.84e6,
+            poisson: 0.3,
+            friction_degrees: friction,
+            dilatancy_degrees: 0.0,
+            cohesion: 0.0,
+            floor_friction: friction.to_radians().tan(),
+            gravity: 9.81,
+            duration: 8.0,
+            shape: Shape::BSpline2,
+            integration: Integration::MaterialPoint,
+            transfer: Transfer::Apic,
+        }
+    }
+}
+
+/// What a collapse run measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CollapseResult {
+    pub aspect: f64,
+    /// Final run-out `L∞` (front: the furthest particle plus half a particle spacing).
+    pub runout: f64,
+    /// Final height `H∞` (the highest particle plus half a particle spacing).
+    pub height: f64,
+    /// `(L∞ − L0) / L0`.
+    pub normalized_runout: f64,
+    /// `H∞ / L0`.
+    pub normalized_height: f64,
+    /// Kinetic energy at the end over `m g H0` (how settled the heap is).
+    pub final_kinetic: f64,
+    /// Largest yield function `f(τ) / E` over the particles at the end (≤ 0 up to round-off).
+    pub worst_yield: f64,
+    /// Relative change of the total mass (zero: particles carry it).
+    pub mass_change: f64,
+    pub steps: usize,
+    pub particles: usize,
+    pub seconds: f64,
+}
+
+impl GranularColumn {
+    /// Builds the simulation: domain long enough for the measured run-out plus margin.
+    pub fn build(&self) -> Result<Sim<2>> {
+        if !(self.aspect > 0.0 && self.aspect.is_finite()) || self.cells_across < 2 {
+            return Err(Error::invalid(
+                "aspect must be positive and cells_across >= 2",
+            ));
+        }
+        let h = self.width / self.cells_across as f64;
+        let h0 = self.aspect * self.width;
+        let reach = 1.0 + 1.6 * NGUYEN_BUI_FUKAGAWA.runout(self.aspect.max(0.65)).unwrap();
+        let cells_x = (reach * self.width / h).ceil() as usize + 4;
+        let cells_y = (h0 / h).ceil() as usize + 4;
+        let mut sim = Sim::<2>::new([0.0, 0.0], [cells_x, cells_y], h)?;
+        sim.set_shape(self.shape)?;
+        sim.set_integration(self.integration)?;
+        sim.set_transfer(self.transfer)?;
+        sim.set_boundary(0, Side::Low, Boundary::Slip)?;
+        sim.set_boundary(1, Side::Low, Boundary::Friction(self.floor_friction))?;
+        sim.set_gravity([0.0, -self.gravity])?;
+        let mat = sim.add_material(Material::drucker_prager(
+            self.density,
+            self.young,
+            self.poisson,
+            self.friction_degrees,
+            self.cohesion,
+            self.dilatancy_degrees,
+        )?);
+        let q = h / 2.0;
+        let (nx, ny) = (2 * self.cells_across, (h0 / q).round() as usize);
+        let x: Vec<Vector<2>> = (0..nx * ny)
+            .map(|k| Vector::<2>::new(((k % nx) as f64 + 0.5) * q, ((k / nx) as f64 + 0.5) * q))
+            .collect();
+        sim.add_particles(mat, &x, &vec![q * q; x.len()], None)?;
+        Ok(sim)
+    }
+
+    /// Runs the collapse to `duration · sqrt(H0 / g)` at CFL 0.3 and measures the heap.
+    pub fn run(&self) -> Result<CollapseResult> {
+        let mut sim = self.build()?;
+        let h0 = self.aspect * self.width;
+        let t_end = self.duration * (h0 / self.gravity).sqrt();
+        let mass0: f64 = sim.particles().mass.iter().sum();
+        let start = std::time::Instant::now();
+        while sim.time() < t_end {
+            let dt = sim.stable_dt(0.3)?.min(t_end - sim.time() + 1e-12);
+            sim.step(dt)?;
+        }
+        let seconds = start.elapsed().as_secs_f64();
+        let q = sim.grid().cell_size / 2.0;
+        let ps = sim.particles();
+        let runout = ps.position.iter().map(|x| x[0]).fold(0.0, f64::max) + q / 2.0;
+        let height = ps.position.iter().map(|x| x[1]).fold(0.0, f64::max) + q / 2.0;
+        let mass: f64 = ps.mass.iter().sum();
+        let Material::DruckerPrager(dp) = sim.materials()[0] else {
+            unreachable!("the column is Drucker–Prager")
+        };
+        let worst_yield = (0..ps.len())
+            .map(|p| {
+                let j = crate::determinant(&ps.deformation_gradient[p]);
+                let mut tau = crate::material::embed3(&ps.stress[p]) * j;
+                tau[(2, 2)] = out_of_plane_stress(&ps.stress[p], ps.pressure[p]) * j;
+                dp.yield_function(&tau.symmetric_eigenvalues()) / dp.elastic.young
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
+        Ok(CollapseResult {
+            aspect: self.aspect,
+            runout,
+            height,
+            normalized_runout: (runout - self.width) / self.width,
+            normalized_height: height / self.width,
+            final_kinetic: ps.kinetic_energy() / (mass0 * self.gravity * h0),
+            worst_yield,
+            mass_change: (mass - mass0).abs() / mass0,
+            steps: sim.steps() as usize,
+            particles: ps.len(),
+            seconds,
+        })
+    }
+}
+
+/// `σ_zz` of a plane-strain particle from its in-plane stress and pressure `−tr(σ)/3`.
+fn out_of_plane_stress(s: &crate::Matrix<2>, pressure: f64) -> f64 {
+    -3.0 * pressure - s.trace()
+}
