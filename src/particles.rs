@@ -53,10 +53,12 @@ pub enum Field {
     DeformationGradient,
     /// One value per particle, equivalent plastic strain (0 for elastic materials).
     PlasticStrain,
+    /// One value per particle, damage in [0, 1] (Johnson–Cook; 0 for other materials).
+    Damage,
 }
 
 impl Field {
-    pub const ALL: [Field; 10] = [
+    pub const ALL: [Field; 11] = [
         Field::Position,
         Field::Velocity,
         Field::Displacement,
@@ -67,6 +69,7 @@ impl Field {
         Field::ReferencePosition,
         Field::DeformationGradient,
         Field::PlasticStrain,
+        Field::Damage,
     ];
 
     /// Values per particle in dimension `d`.
@@ -74,7 +77,11 @@ impl Field {
         match self {
             Field::Position | Field::Velocity | Field::Displacement | Field::ReferencePosition => d,
             Field::Stress | Field::DeformationGradient => d * d,
-            Field::Pressure | Field::Volume | Field::Mass | Field::PlasticStrain => 1,
+            Field::Pressure
+            | Field::Volume
+            | Field::Mass
+            | Field::PlasticStrain
+            | Field::Damage => 1,
         }
     }
 
@@ -91,6 +98,7 @@ impl Field {
             Field::ReferencePosition => "reference_position",
             Field::DeformationGradient => "deformation_gradient",
             Field::PlasticStrain => "plastic_strain",
+            Field::Damage => "damage",
         }
     }
 }
@@ -146,6 +154,11 @@ impl<const D: usize> Particles<D> {
             Field::PlasticStrain => {
                 for (p, o) in out.iter_mut().enumerate() {
                     *o = self.plastic.get(p).map_or(0.0, |s| s.plastic_strain);
+                }
+            }
+            Field::Damage => {
+                for (p, o) in out.iter_mut().enumerate() {
+                    *o = self.plastic.get(p).map_or(0.0, |s| s.damage);
                 }
             }
         }

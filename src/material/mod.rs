@@ -6,9 +6,11 @@
 //! damage models will carry typed per-particle state.
 
 mod elastic;
+mod johnson_cook;
 mod plastic;
 
 pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
+pub use johnson_cook::{JohnsonCook, JohnsonCookParameters, MieGruneisen};
 pub use plastic::{DruckerPrager, PlasticState};
 
 use crate::error::Result;
@@ -37,6 +39,8 @@ pub enum Material {
     NeoHookean(NeoHookean),
     /// Drucker–Prager soil (Hencky elasticity, non-associated flow, apex return).
     DruckerPrager(DruckerPrager),
+    /// J2 plasticity with Johnson–Cook hardening and damage, optional Mie–Grüneisen EOS.
+    JohnsonCook(JohnsonCook),
 }
 
 impl Material {
@@ -72,25 +76,33 @@ impl Material {
         )?))
     }
 
+    /// Johnson–Cook metal (see [`JohnsonCookParameters`]).
+    pub fn johnson_cook(parameters: JohnsonCookParameters) -> Result<Self> {
+        Ok(Material::JohnsonCook(JohnsonCook::new(parameters)?))
+    }
+
     fn model(&self) -> &dyn Constitutive {
         match self {
             Material::LinearElastic(m) => m,
             Material::NeoHookean(m) => m,
             Material::DruckerPrager(m) => m,
+            Material::JohnsonCook(m) => m,
         }
     }
 
-    /// The constitutive update of a history model: new state and Cauchy stress after the
-    /// increment `df = F^{n+1} (F^n)⁻¹`, for the new `det F = j`. Elastic models have no
+    /// The constitutive update of a history model over `dt`: new state and Cauchy stress after
+    /// the increment `df = F^{n+1} (F^n)⁻¹`, for the new `det F = j`. Elastic models have no
     /// history and never get here (the step calls [`Constitutive::cauchy_stress`]).
     pub fn plastic_update(
         &self,
         state: &PlasticState,
         df: &Matrix3<f64>,
         j: f64,
+        dt: f64,
     ) -> (PlasticState, Matrix3<f64>) {
         match self {
             Material::DruckerPrager(m) => m.update(state, df, j),
+            Material::JohnsonCook(m) => m.update(state, df, j, dt),
             Material::LinearElastic(_) | Material::NeoHookean(_) => {
                 unreachable!("elastic materials have no history")
             }
@@ -105,8 +117,37 @@ impl Material {
                 m.elastic_energy(&s.elastic_deformation) * f.determinant()
                     / s.elastic_deformation.determinant()
             }
+            (Material::JohnsonCook(m), Some(s)) => {
+                m.elastic_energy(&s.elastic_deformation) * f.determinant()
+                    / s.elastic_deformation.determinant()
+            }
             _ => self.strain_energy_density(f),
         }
+    }
+}
+
+impl Constitutive for JohnsonCook {
+    fn density(&self) -> f64 {
+        self.elastic.density
+    }
+    fn wave_speed(&self, j: f64) -> f64 {
+        JohnsonCook::wave_speed(self, j)
+    }
+    fn is_elastic(&self) -> bool {
+        false
+    }
+    /// The elastic stress of `f` taken as wholly elastic and undamaged (no return mapping).
+    fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
+        let svd = f.svd(true, false);
+        let u = svd.u.expect("U");
+        let eps = svd.singular_values.map(|s| s.ln());
+        let dev = eps - nalgebra::Vector3::repeat(eps.sum() / 3.0);
+        let j = f.determinant();
+        u * Matrix3::from_diagonal(&(2.0 * self.elastic.mu / j * dev)) * u.transpose()
+            - Matrix3::identity() * self.pressure(j, 0.0)
+    }
+    fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
+        self.elastic_energy(f)
     }
 }
 

@@ -20,6 +20,10 @@ pub struct PlasticState {
     pub elastic_deformation: Matrix3<f64>,
     /// Equivalent plastic strain `∫ sqrt(2/3 ‖dε_p‖²)`.
     pub plastic_strain: f64,
+    /// Damage `D ∈ [0, 1]` (Johnson–Cook; 1 = failed).
+    pub damage: f64,
+    /// Temperature rise above room temperature from plastic work (K).
+    pub heating: f64,
 }
 
 impl Default for PlasticState {
@@ -27,6 +31,8 @@ impl Default for PlasticState {
         PlasticState {
             elastic_deformation: Matrix3::identity(),
             plastic_strain: 0.0,
+            damage: 0.0,
+            heating: 0.0,
         }
     }
 }
@@ -170,6 +176,7 @@ impl DruckerPrager {
             PlasticState {
                 elastic_deformation: fe_new,
                 plastic_strain: state.plastic_strain + plastic,
+                ..*state
             },
             sigma,
         )

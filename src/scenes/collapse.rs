@@ -93,7 +93,7 @@ impl Default for GranularColumn {
 #[derive(Debug, Clone, PartialEq)]
 pub struct CollapseResult {
     pub aspect: f64,
-    /// Final run-out `L∞` (front: the furthest particle plus half a particle spacing).
+    /// Final run-out `L∞`: the front of the continuous deposit (see [`deposit_front`]).
     pub runout: f64,
     /// Final height `H∞` (the highest particle plus half a particle spacing).
     pub height: f64,
@@ -151,19 +151,37 @@ impl GranularColumn {
 
     /// Runs the collapse to `duration · sqrt(H0 / g)` at CFL 0.3 and measures the heap.
     pub fn run(&self) -> Result<CollapseResult> {
+        Ok(self.run_observed(0, |_| Ok(()))?.0)
+    }
+
+    /// [`GranularColumn::run`], calling `on_frame` at the start and `frames` times evenly over
+    /// the run (for VTK output), and returning the final simulation too.
+    pub fn run_observed(
+        &self,
+        frames: usize,
+        mut on_frame: impl FnMut(&Sim<2>) -> Result<()>,
+    ) -> Result<(CollapseResult, Sim<2>)> {
         let mut sim = self.build()?;
         let h0 = self.aspect * self.width;
         let t_end = self.duration * (h0 / self.gravity).sqrt();
         let mass0: f64 = sim.particles().mass.iter().sum();
         let start = std::time::Instant::now();
+        let mut next_frame = 0;
         while sim.time() < t_end {
+            if frames > 0 && sim.time() >= next_frame as f64 * t_end / frames as f64 {
+                on_frame(&sim)?;
+                next_frame += 1;
+            }
             let dt = sim.stable_dt(0.3)?.min(t_end - sim.time() + 1e-12);
             sim.step(dt)?;
+        }
+        if frames > 0 {
+            on_frame(&sim)?;
         }
         let seconds = start.elapsed().as_secs_f64();
         let q = sim.grid().cell_size / 2.0;
         let ps = sim.particles();
-        let runout = ps.position.iter().map(|x| x[0]).fold(0.0, f64::max) + q / 2.0;
+        let runout = deposit_front(&ps.position, q);
         let height = ps.position.iter().map(|x| x[1]).fold(0.0, f64::max) + q / 2.0;
         let mass: f64 = ps.mass.iter().sum();
         let Material::DruckerPrager(dp) = sim.materials()[0] else {
@@ -177,7 +195,7 @@ impl GranularColumn {
                 dp.yield_function(&tau.symmetric_eigenvalues()) / dp.elastic.young
             })
             .fold(f64::NEG_INFINITY, f64::max);
-        Ok(CollapseResult {
+        let result = CollapseResult {
             aspect: self.aspect,
             runout,
             height,
@@ -189,8 +207,26 @@ impl GranularColumn {
             steps: sim.steps() as usize,
             particles: ps.len(),
             seconds,
-        })
+        };
+        Ok((result, sim))
     }
+}
+
+/// The front of the deposit: walking out from the wall over the particles sorted by `x`, the
+/// last particle before the first gap wider than four particle spacings `q` along `x`, plus
+/// `q/2` (the edge of its share of the body). Particles thrown ahead of the heap and separated
+/// from it do not count, as scattered grains do not in the experiments' run-out.
+pub fn deposit_front(positions: &[Vector<2>], q: f64) -> f64 {
+    let mut x: Vec<f64> = positions.iter().map(|p| p[0]).collect();
+    x.sort_by(f64::total_cmp);
+    let mut front = x.first().copied().unwrap_or(0.0);
+    for &xi in &x {
+        if xi - front > 4.0 * q {
+            break;
+        }
+        front = xi;
+    }
+    front + q / 2.0
 }
 
 /// `σ_zz` of a plane-strain particle from its in-plane stress and pressure `−tr(σ)/3`.

@@ -196,4 +196,4 @@ pub fn run_vibrating_bar<const D: usize>(
 }
 
 mod collapse;
-pub use collapse::{CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+pub use collapse::{deposit_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};

@@ -331,7 +331,7 @@ impl<const D: usize> Sim<D> {
             } else {
                 let f_old = embed3(&ps.deformation_gradient[p]);
                 let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
-                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j);
+                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
                 u.plastic = state;
                 s3
             };
