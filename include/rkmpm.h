@@ -148,6 +148,48 @@ typedef int32_t (*RkmpmBodyForceFn)(void *user_data,
                                     double *accelerations);
 
 /**
+ * Johnson–Cook metal for `rkmpm_sim_add_material_johnson_cook` (SI units, temperatures in
+ * kelvin). Yield stress `(a + b ε̄^n)(1 + c ln max(ε̇/reference_strain_rate, 1))(1 − T*^m)`,
+ * `T* = (T − room_temperature)/(melt_temperature − room_temperature)`; adiabatic heating
+ * `ΔT = taylor_quinney σ_y Δε̄ / (density specific_heat)`.
+ * With `damage_enabled = 1`, Johnson–Cook damage with `d1 … d5`: at `D = 1` a particle keeps
+ * no deviatoric stress and no tension (`RKMPM_FIELD_DAMAGE` reads `D`).
+ * With `eos_enabled = 1`, the pressure follows Mie–Grüneisen (`eos_sound_speed` c0, `eos_slope`
+ * s, `eos_gamma0` Γ0); with 0, Hencky's `p = −K ln J`.
+ */
+typedef struct RkmpmJohnsonCook {
+  double density;
+  double young;
+  double poisson;
+  double a;
+  double b;
+  double n;
+  double c;
+  double reference_strain_rate;
+  double m;
+  double room_temperature;
+  double melt_temperature;
+  double specific_heat;
+  double taylor_quinney;
+  /**
+   * 0 or 1.
+   */
+  uint32_t damage_enabled;
+  double d1;
+  double d2;
+  double d3;
+  double d4;
+  double d5;
+  /**
+   * 0 or 1.
+   */
+  uint32_t eos_enabled;
+  double eos_sound_speed;
+  double eos_slope;
+  double eos_gamma0;
+} RkmpmJohnsonCook;
+
+/**
  * Particle quantity (`rkmpm_sim_get_particles`); the comment gives the values per particle.
  */
 typedef uint32_t RkmpmField;
@@ -274,6 +316,11 @@ typedef uint32_t RkmpmField;
  * 1 value: equivalent plastic strain (0 for elastic materials).
  */
 #define RKMPM_FIELD_PLASTIC_STRAIN 9
+
+/**
+ * 1 value: damage in [0, 1] (Johnson–Cook; 0 for other materials).
+ */
+#define RKMPM_FIELD_DAMAGE 10
 
 #define RkmpmStatus_ALL { RKMPM_OK, RKMPM_ERR_NULL_POINTER, RKMPM_ERR_INVALID_ARGUMENT, RKMPM_ERR_BUFFER_TOO_SMALL, RKMPM_ERR_INVALID_STATE, RKMPM_ERR_UNKNOWN_MATERIAL, RKMPM_ERR_OUTSIDE_GRID, RKMPM_ERR_UNSTABLE_TIME_STEP, RKMPM_ERR_NON_FINITE, RKMPM_ERR_INVERTED_PARTICLE, RKMPM_ERR_CALLBACK, RKMPM_ERR_IO, RKMPM_ERR_UNSUPPORTED, RKMPM_ERR_PANIC, }
 
@@ -461,6 +508,17 @@ enum RkmpmStatus rkmpm_sim_add_material_drucker_prager(struct RkmpmSim *sim,
                                                        double cohesion,
                                                        double dilatancy_angle,
                                                        uint32_t *out_id);
+
+/**
+ * Adds a Johnson–Cook metal described by `*parameters` (see `RkmpmJohnsonCook`); its particles
+ * carry `RKMPM_FIELD_PLASTIC_STRAIN` and `RKMPM_FIELD_DAMAGE`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `parameters` valid for a read; `out_id` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_add_material_johnson_cook(struct RkmpmSim *sim,
+                                                     const struct RkmpmJohnsonCook *parameters,
+                                                     uint32_t *out_id);
 
 /**
  * Adds `count` particles of `material`: `positions` (`count * dim`, inside the grid),

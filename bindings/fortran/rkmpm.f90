@@ -87,6 +87,18 @@ module rkmpm
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_REFERENCE_POSITION = 7    ! dim
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_DEFORMATION_GRADIENT = 8  ! dim*dim, row-major
    integer(c_int32_t), parameter, public :: RKMPM_FIELD_PLASTIC_STRAIN = 9        ! 1, equivalent plastic strain
+   integer(c_int32_t), parameter, public :: RKMPM_FIELD_DAMAGE = 10               ! 1, damage in [0, 1]
+
+   !> Johnson-Cook metal parameters (struct RkmpmJohnsonCook; SI units, kelvin). Set
+   !> damage_enabled / eos_enabled to 1 to use d1..d5 / the Mie-Grueneisen eos_* values.
+   type, bind(C), public :: rkmpm_johnson_cook
+      real(c_double) :: density, young, poisson, a, b, n, c, reference_strain_rate, m
+      real(c_double) :: room_temperature, melt_temperature, specific_heat, taylor_quinney
+      integer(c_int32_t) :: damage_enabled = 0
+      real(c_double) :: d1 = 0, d2 = 0, d3 = 0, d4 = 0, d5 = 0
+      integer(c_int32_t) :: eos_enabled = 0
+      real(c_double) :: eos_sound_speed = 0, eos_slope = 0, eos_gamma0 = 0
+   end type rkmpm_johnson_cook
 
    ! Sides of a grid face (rkmpm_sim_set_boundary)
    integer(c_int32_t), parameter, public :: RKMPM_SIDE_LOW = -1
@@ -142,6 +154,7 @@ module rkmpm
       procedure :: add_material_linear_elastic => sim_add_material_linear_elastic
       procedure :: add_material_neo_hookean => sim_add_material_neo_hookean
       procedure :: add_material_drucker_prager => sim_add_material_drucker_prager
+      procedure :: add_material_johnson_cook => sim_add_material_johnson_cook
       procedure :: add_particles => sim_add_particles
       procedure :: add_boundary_points => sim_add_boundary_points
       procedure :: boundary_point_count => sim_boundary_point_count
@@ -321,6 +334,16 @@ module rkmpm
          real(c_double), value :: dilatancy_angle
          integer(c_int32_t), intent(out) :: out_id
       end function rkmpm_sim_add_material_drucker_prager
+
+      ! enum RkmpmStatus rkmpm_sim_add_material_johnson_cook(struct RkmpmSim *sim,
+      !     const struct RkmpmJohnsonCook *parameters, uint32_t *out_id);
+      integer(c_int) function rkmpm_sim_add_material_johnson_cook(sim, parameters, out_id) &
+         bind(C, name="rkmpm_sim_add_material_johnson_cook")
+         import :: c_int, c_ptr, c_int32_t, rkmpm_johnson_cook
+         type(c_ptr), value :: sim
+         type(rkmpm_johnson_cook), intent(in) :: parameters
+         integer(c_int32_t), intent(out) :: out_id
+      end function rkmpm_sim_add_material_johnson_cook
 
       ! enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim, uint32_t material, size_t count,
       !                                          const double *positions, const double *volumes,
@@ -778,6 +801,22 @@ contains
       if (present(errmsg)) errmsg = text
       id = out_id
    end subroutine sim_add_material_drucker_prager
+
+   !> Adds a Johnson-Cook metal; see type(rkmpm_johnson_cook) and the C header.
+   subroutine sim_add_material_johnson_cook(self, parameters, id, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      type(rkmpm_johnson_cook), intent(in) :: parameters
+      integer(c_int32_t), intent(out) :: id
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: out_id
+      out_id = -1
+      call report(rkmpm_sim_add_material_johnson_cook(self%h, parameters, out_id), &
+                  'add_material_johnson_cook', stat, text)
+      if (present(errmsg)) errmsg = text
+      id = out_id
+   end subroutine sim_add_material_johnson_cook
 
    !> Adds size(x, 2) particles of `material`: positions x(dim, n), volumes(n) and optional
    !> velocities(dim, n) (at rest when absent). All or nothing.

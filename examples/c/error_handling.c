@@ -373,6 +373,15 @@ int main(void) {
                         RKMPM_ERR_NULL_POINTER, "rkmpm_sim_add_material_linear_elastic");
   EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_material_neo_hookean(sim, 1.0, 1.0, 0.0, NULL),
                         RKMPM_ERR_NULL_POINTER, "rkmpm_sim_add_material_neo_hookean");
+  EXPECT_FAIL_UNCHANGED(sim,
+                        rkmpm_sim_add_material_drucker_prager(sim, 1.0, 1.0, 0.0, 30.0, 0.0, 0.0,
+                                                              NULL),
+                        RKMPM_ERR_NULL_POINTER, "rkmpm_sim_add_material_drucker_prager");
+  {
+    uint32_t unused = 0;
+    EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_material_johnson_cook(sim, NULL, &unused),
+                          RKMPM_ERR_NULL_POINTER, "rkmpm_sim_add_material_johnson_cook");
+  }
   const double one_x[2] = {0.5, 0.5}, one_vol[1] = {1e-3};
   EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_particles(sim, material, 1, NULL, one_vol, NULL),
                         RKMPM_ERR_NULL_POINTER, "rkmpm_sim_add_particles");
@@ -430,6 +439,21 @@ int main(void) {
                         RKMPM_ERR_INVALID_ARGUMENT, "rkmpm_sim_add_material_linear_elastic");
   EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_material_neo_hookean(sim, NAN, 100.0, 0.3, &id),
                         RKMPM_ERR_INVALID_ARGUMENT, "rkmpm_sim_add_material_neo_hookean");
+  EXPECT_FAIL_UNCHANGED(sim,
+                        rkmpm_sim_add_material_drucker_prager(sim, 2650.0, 1e6, 0.3, 30.0, 0.0,
+                                                              31.0, &id),
+                        RKMPM_ERR_INVALID_ARGUMENT, "rkmpm_sim_add_material_drucker_prager");
+  {
+    /* OFHC copper, with a flag that is neither 0 nor 1, then a melt below room temperature. */
+    RkmpmJohnsonCook jc = {8960.0, 124e9, 0.34, 90e6, 292e6, 0.31, 0.025, 1.0, 1.09, 298.0,
+                           1356.0, 383.0, 0.9, 2, 0.54, 4.89, -3.03, 0.014, 1.12, 0, 0.0, 0.0, 0.0};
+    EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_material_johnson_cook(sim, &jc, &id),
+                          RKMPM_ERR_INVALID_ARGUMENT, "rkmpm_sim_add_material_johnson_cook");
+    jc.damage_enabled = 1;
+    jc.melt_temperature = 200.0;
+    EXPECT_FAIL_UNCHANGED(sim, rkmpm_sim_add_material_johnson_cook(sim, &jc, &id),
+                          RKMPM_ERR_INVALID_ARGUMENT, "rkmpm_sim_add_material_johnson_cook");
+  }
   /* Failed additions do not use up ids: the next material gets id 1. */
   RKMPM_CHECK(rkmpm_sim_add_material_neo_hookean(sim, 1.0, 100.0, 0.3, &id));
   EXPECT(id == 1, "second material got id %u", (unsigned)id);

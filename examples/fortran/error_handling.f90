@@ -74,7 +74,8 @@ program error_handling
    type(rkmpm_sim) :: sim, unused
    integer(c_int) :: st, code
    character(:), allocatable :: msg
-   integer(c_int32_t) :: mat, mat2
+   integer(c_int32_t) :: mat, mat2, mat3
+   type(rkmpm_johnson_cook) :: jc
    real(c_double) :: nan, dt, critical, t0
    real(c_double) :: x(2, 64), vol(64), v(2, 64), buf(130), pos(2, 64), pos_after(2, 64)
    real(c_double), allocatable :: wrong(:, :)
@@ -166,6 +167,16 @@ program error_handling
    call sim%add_material_neo_hookean(1.0_c_double, 100.0_c_double, 0.3_c_double, mat2, stat=st, errmsg=msg)
    call expect(st, RKMPM_OK, msg, 'neo-Hookean material')
    call expect_true(mat == 0 .and. mat2 == 1, 'material ids 0 and 1')
+   call sim%add_material_drucker_prager(2650.0_c_double, 1e6_c_double, 0.3_c_double, 30.0_c_double, &
+                                        0.0_c_double, 31.0_c_double, mat3, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'dilatancy above friction')
+   jc%density = 8960; jc%young = 124e9_c_double; jc%poisson = 0.34_c_double
+   jc%a = 90e6_c_double; jc%b = 292e6_c_double; jc%n = 0.31_c_double; jc%c = 0.025_c_double
+   jc%reference_strain_rate = 1; jc%m = 1.09_c_double; jc%room_temperature = 298
+   jc%melt_temperature = 1356; jc%specific_heat = 383; jc%taylor_quinney = 0.9_c_double
+   jc%eos_enabled = 2
+   call sim%add_material_johnson_cook(jc, mat3, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'Johnson-Cook eos flag 2')
 
    ! ---- particles: an 8 x 8 block on [0.3, 0.7]^2 ----
    p = 0

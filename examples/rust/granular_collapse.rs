@@ -85,7 +85,7 @@ fn write_tables(
         "# Granular column collapse (plane strain) against measured power laws\n"
     )?;
     writeln!(md, "Regenerate: `cargo run --release --example granular_collapse` (this table: {cells} cells across the column).\n")?;
-    writeln!(md, "Drucker–Prager (φ = 19.8°, ψ = 0, c = 0, E = 0.84 MPa, ν = 0.3, ρ = 2650 kg/m³), column L0 = 0.1 m wide against a slip wall, floor with Coulomb friction μ = tan φ, quadratic B-spline, APIC, CFL 0.3, run for 8 sqrt(H0/g). Laws: Nguyen, Bui & Fukagawa (2015), true 2D aluminium-rod columns: (L∞ − L0)/L0 = 3.25 a^0.96 (0.65 ≤ a ≤ 1.5), 3.80 a^0.73 (a ≥ 1.5); H∞/L0 = a / (1.42 a^(2/3)) (a ≥ 0.65), H∞ = H0 below.\n")?;
+    writeln!(md, "Drucker–Prager (φ = 19.8°, ψ = 0, c = 0, E = 0.84 MPa, ν = 0.3, ρ = 2650 kg/m³), column L0 = 0.1 m wide against a slip wall, floor with Coulomb friction μ = tan φ, quadratic B-spline, APIC, CFL 0.3, run for 8 sqrt(H0/g). Run-out: the front of the contiguous deposit (a gap wider than four particle spacings ends it); height: the highest particle. Laws: Nguyen, Bui & Fukagawa (2015), true 2D aluminium-rod columns: (L∞ − L0)/L0 = 3.25 a^0.96 (0.65 ≤ a ≤ 1.5), 3.80 a^0.73 (a ≥ 1.5); H∞/L0 = a / (1.42 a^(2/3)) (a ≥ 0.65), H∞ = H0 below.\n")?;
     writeln!(md, "| a = H0/L0 | run-out (L∞−L0)/L0 | law | ratio | height H∞/L0 | law | ratio | KE/(m g H0) at end | particles | steps | run time (s) |")?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|")?;
     for r in rows {

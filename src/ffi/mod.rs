@@ -96,6 +96,8 @@ pub const RKMPM_FIELD_REFERENCE_POSITION: RkmpmField = 7;
 pub const RKMPM_FIELD_DEFORMATION_GRADIENT: RkmpmField = 8;
 /// 1 value: equivalent plastic strain (0 for elastic materials).
 pub const RKMPM_FIELD_PLASTIC_STRAIN: RkmpmField = 9;
+/// 1 value: damage in [0, 1] (Johnson–Cook; 0 for other materials).
+pub const RKMPM_FIELD_DAMAGE: RkmpmField = 10;
 
 /// Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
 /// the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
@@ -574,6 +576,96 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_drucker_prager(
             cohesion,
             dilatancy_angle,
         )
+    })
+}
+
+/// Johnson–Cook metal for `rkmpm_sim_add_material_johnson_cook` (SI units, temperatures in
+/// kelvin). Yield stress `(a + b ε̄^n)(1 + c ln max(ε̇/reference_strain_rate, 1))(1 − T*^m)`,
+/// `T* = (T − room_temperature)/(melt_temperature − room_temperature)`; adiabatic heating
+/// `ΔT = taylor_quinney σ_y Δε̄ / (density specific_heat)`.
+/// With `damage_enabled = 1`, Johnson–Cook damage with `d1 … d5`: at `D = 1` a particle keeps
+/// no deviatoric stress and no tension (`RKMPM_FIELD_DAMAGE` reads `D`).
+/// With `eos_enabled = 1`, the pressure follows Mie–Grüneisen (`eos_sound_speed` c0, `eos_slope`
+/// s, `eos_gamma0` Γ0); with 0, Hencky's `p = −K ln J`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct RkmpmJohnsonCook {
+    pub density: f64,
+    pub young: f64,
+    pub poisson: f64,
+    pub a: f64,
+    pub b: f64,
+    pub n: f64,
+    pub c: f64,
+    pub reference_strain_rate: f64,
+    pub m: f64,
+    pub room_temperature: f64,
+    pub melt_temperature: f64,
+    pub specific_heat: f64,
+    pub taylor_quinney: f64,
+    /// 0 or 1.
+    pub damage_enabled: u32,
+    pub d1: f64,
+    pub d2: f64,
+    pub d3: f64,
+    pub d4: f64,
+    pub d5: f64,
+    /// 0 or 1.
+    pub eos_enabled: u32,
+    pub eos_sound_speed: f64,
+    pub eos_slope: f64,
+    pub eos_gamma0: f64,
+}
+
+fn flag(name: &str, value: u32) -> Result<bool, Failure> {
+    match value {
+        0 => Ok(false),
+        1 => Ok(true),
+        _ => Err(crate::Error::invalid(format!("{name} must be 0 or 1, got {value}")).into()),
+    }
+}
+
+/// Adds a Johnson–Cook metal described by `*parameters` (see `RkmpmJohnsonCook`); its particles
+/// carry `RKMPM_FIELD_PLASTIC_STRAIN` and `RKMPM_FIELD_DAMAGE`.
+///
+/// # Safety
+/// `sim` must be a live handle; `parameters` valid for a read; `out_id` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_material_johnson_cook(
+    sim: *mut RkmpmSim,
+    parameters: *const RkmpmJohnsonCook,
+    out_id: *mut u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_add_material_johnson_cook", || {
+        let s = sim_mut(sim)?;
+        check_ptr("parameters", parameters)?;
+        check_ptr("out_id", out_id)?;
+        let p = *parameters;
+        let damage = flag("damage_enabled", p.damage_enabled)?;
+        let eos = flag("eos_enabled", p.eos_enabled)?;
+        let material = Material::johnson_cook(crate::material::JohnsonCookParameters {
+            density: p.density,
+            young: p.young,
+            poisson: p.poisson,
+            a: p.a,
+            b: p.b,
+            n: p.n,
+            c: p.c,
+            reference_strain_rate: p.reference_strain_rate,
+            m: p.m,
+            room_temperature: p.room_temperature,
+            melt_temperature: p.melt_temperature,
+            specific_heat: p.specific_heat,
+            taylor_quinney: p.taylor_quinney,
+            damage: damage.then_some([p.d1, p.d2, p.d3, p.d4, p.d5]),
+            eos: eos.then_some(crate::material::MieGruneisen {
+                sound_speed: p.eos_sound_speed,
+                slope: p.eos_slope,
+                gamma0: p.eos_gamma0,
+            }),
+        })?;
+        let id = with_sim!(&mut s.sim, m => m.add_material(material));
+        write_out("out_id", out_id, id)
     })
 }
 

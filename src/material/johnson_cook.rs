@@ -392,7 +392,11 @@ mod tests {
         }
         assert!(state.damage == 1.0, "never failed");
         let ef = (0.54 + 4.89) * (1.0 + 0.014 * (1e4f64).ln());
-        assert!((state.plastic_strain - ef).abs() < 0.011, "{} vs {ef}", state.plastic_strain);
+        assert!(
+            (state.plastic_strain - ef).abs() < 0.011,
+            "{} vs {ef}",
+            state.plastic_strain
+        );
         // Failed: tension gives no stress, compression gives pressure only.
         let (_, s) = cu.update(&state, &stretch(0.01), 1.02, 1e-6);
         assert_eq!(s, Matrix3::zeros());

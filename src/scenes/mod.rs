@@ -197,3 +197,6 @@ pub fn run_vibrating_bar<const D: usize>(
 
 mod collapse;
 pub use collapse::{deposit_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+
+mod taylor;
+pub use taylor::{TaylorBar, TaylorCase, TaylorResult};
