@@ -426,6 +426,31 @@ enum RkmpmStatus rkmpm_sim_set_transfer(struct RkmpmSim *sim,
                                         double flip_ratio);
 
 /**
+ * Turns contact between bodies on (`enabled` = 1, Coulomb `friction` >= 0) or off (0), before
+ * the first step. With contact every material is a body with its own grid velocity field
+ * (Bardenhagen et al. 2000): bodies meet without sticking, slide with friction `friction` and
+ * separate freely. Works with USL and material-point integration, without boundary points
+ * (else the first step returns `RKMPM_ERR_UNSUPPORTED`).
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_contact(struct RkmpmSim *sim, uint32_t enabled, double friction);
+
+/**
+ * Adds a rigid body material: `density` > 0 and the prescribed constant `velocity` (`dim`
+ * values). Its particles move with that velocity and do not deform; it needs contact
+ * (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
+ *
+ * # Safety
+ * `sim` must be a live handle; `velocity` must hold `dim` values; `out_id` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_add_material_rigid(struct RkmpmSim *sim,
+                                              double density,
+                                              const double *velocity,
+                                              uint32_t *out_id);
+
+/**
  * Chooses USL or MUSL (before the first step).
  *
  * # Safety

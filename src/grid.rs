@@ -146,6 +146,8 @@ pub struct GridNodes<const D: usize> {
     /// `L_I` add over `Ψ_I` to mass, momentum and body force, `Σ_p m_p (L_I − Ψ_I)(1, v_p, b_p)`.
     /// The grid update blends them in where `Σ m_p Ψ_I` is small against `Σ m_p L_I`.
     pub lumping: Option<LumpingShift<D>>,
+    /// Mass gradient `Σ_p m_p ∇Ψ_I(x_p)` for contact normals; empty unless contact is on.
+    pub mass_gradient: Vec<Vector<D>>,
     touched: Vec<bool>,
     /// Position of each touched node in `active` (valid only for touched nodes).
     slot: Vec<u32>,
@@ -168,6 +170,24 @@ impl<const D: usize> GridNodes<D> {
         if let Some(l) = self.lumping.as_mut() {
             *l = LumpingShift::new(n);
         }
+        if !self.mass_gradient.is_empty() {
+            self.mass_gradient = vec![Vector::zeros(); n];
+        }
+    }
+
+    /// Adds (or removes) the storage for the mass gradient (contact).
+    pub fn set_mass_gradient(&mut self, on: bool) {
+        match (on, self.mass_gradient.is_empty()) {
+            (true, true) => self.mass_gradient = vec![Vector::zeros(); self.mass.len()],
+            (false, false) => self.mass_gradient = Vec::new(),
+            _ => {}
+        }
+    }
+
+    /// Whether node `n` was written this step.
+    #[inline]
+    pub fn is_touched(&self, n: usize) -> bool {
+        self.touched.get(n).copied().unwrap_or(false)
     }
 
     /// Adds (or removes) the storage for the lumping shift of signed shape functions.
@@ -206,6 +226,9 @@ impl<const D: usize> GridNodes<D> {
             self.velocity_old[n] = Vector::zeros();
             self.velocity[n] = Vector::zeros();
             self.touched[n] = false;
+            if !self.mass_gradient.is_empty() {
+                self.mass_gradient[n] = Vector::zeros();
+            }
             if let Some(l) = self.lumping.as_mut() {
                 l.mass[n] = 0.0;
                 l.momentum[n] = Vector::zeros();

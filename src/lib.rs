@@ -22,6 +22,7 @@
 //! ```
 
 pub mod boundary;
+pub mod contact;
 pub mod error;
 pub mod ffi;
 pub mod grid;

@@ -82,6 +82,8 @@ pub struct Options<const D: usize> {
     pub scheme: Scheme,
     pub gravity: Vector<D>,
     pub walls: Walls<D>,
+    /// Before stepping. Default: none (one velocity field; bodies stick where they meet).
+    pub contact: Option<crate::contact::Contact>,
 }
 
 /// An explicit MPM simulation in `D` dimensions (2 or 3).
@@ -119,6 +121,7 @@ impl<const D: usize> Sim<D> {
                 scheme: Scheme::Usl,
                 gravity: Vector::zeros(),
                 walls: Walls::default(),
+                contact: None,
             },
             shape,
             materials: Vec::new(),
@@ -185,6 +188,21 @@ impl<const D: usize> Sim<D> {
                 .resize(self.particles.len(), Matrix::<D>::zeros()),
             Transfer::PicFlip { .. } => self.particles.affine = Vec::new(),
         }
+        Ok(())
+    }
+
+    /// Turns on contact between bodies (every material is a body with its own velocity field;
+    /// see [`crate::contact`]) with Coulomb friction `friction ≥ 0`, or off with `None`. Before
+    /// stepping only; not with VC, boundary points or MUSL.
+    pub fn set_contact(&mut self, friction: Option<f64>) -> Result<()> {
+        self.before_stepping("contact")?;
+        if let Some(mu) = friction {
+            check_finite("friction", mu)?;
+            if mu < 0.0 {
+                return Err(Error::invalid(format!("friction must be >= 0, got {mu}")));
+            }
+        }
+        self.options.contact = friction.map(|friction| crate::contact::Contact { friction });
         Ok(())
     }
 

@@ -582,6 +582,91 @@ fn johnson_cook_metal_through_the_c_api() {
     }
 }
 
+/// Contact and rigid bodies through the C API: bad flags, friction and pointers are refused; a
+/// rigid body without contact is refused at the first step; with contact a block falls onto a
+/// fixed rigid slab and stays above it.
+#[test]
+fn contact_and_rigid_bodies_through_the_c_api() {
+    let mut sim = null_mut();
+    let (origin, cells) = ([0.0, 0.0], [10usize, 20]);
+    unsafe {
+        assert_eq!(
+            rkmpm_sim_new(2, origin.as_ptr(), cells.as_ptr(), 0.05, &mut sim),
+            RKMPM_OK
+        );
+        assert_eq!(
+            rkmpm_sim_set_contact(sim, 2, 0.1),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_set_contact(sim, 1, -0.1),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(last_error().contains("friction"), "{}", last_error());
+        let mut id = u32::MAX;
+        assert_eq!(
+            rkmpm_sim_add_material_rigid(sim, 7800.0, null(), &mut id),
+            RKMPM_ERR_NULL_POINTER
+        );
+        let still = [0.0, 0.0];
+        assert_eq!(
+            rkmpm_sim_add_material_rigid(sim, -1.0, still.as_ptr(), &mut id),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_add_material_rigid(sim, 7800.0, still.as_ptr(), &mut id),
+            RKMPM_OK
+        );
+        assert_eq!(id, 0);
+        let mut soft = u32::MAX;
+        assert_eq!(
+            rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e5, 0.3, &mut soft),
+            RKMPM_OK
+        );
+        let q = 0.025;
+        let (mut slab, mut block) = (Vec::new(), Vec::new());
+        for j in 0..4 {
+            for i in 0..16 {
+                slab.extend([0.05 + (i as f64 + 0.5) * q, 0.2 + (j as f64 + 0.5) * q]);
+            }
+        }
+        for j in 0..8 {
+            for i in 0..8 {
+                block.extend([0.15 + (i as f64 + 0.5) * q, 0.5 + (j as f64 + 0.5) * q]);
+            }
+        }
+        let vol = [q * q; 64];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, 0, 64, slab.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_OK
+        );
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, soft, 64, block.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_OK
+        );
+        let g = [0.0, -9.81];
+        assert_eq!(rkmpm_sim_set_gravity(sim, g.as_ptr()), RKMPM_OK);
+        let mut dt = 0.0;
+        assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+        assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_ERR_UNSUPPORTED);
+        assert!(last_error().contains("contact"), "{}", last_error());
+        assert_eq!(rkmpm_sim_set_contact(sim, 1, 0.3), RKMPM_OK);
+        for _ in 0..600 {
+            assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+            assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK, "{}", last_error());
+        }
+        let mut x = vec![0.0; 256];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_POSITION, x.as_mut_ptr(), 256),
+            RKMPM_OK
+        );
+        assert_eq!(&x[..128], &slab[..], "the rigid slab moved");
+        let lowest = (64..128).map(|p| x[2 * p + 1]).fold(1.0, f64::min);
+        assert!(lowest > 0.3, "the block sank into the slab: {lowest}");
+        rkmpm_sim_free(sim);
+    }
+}
+
 /// Separate simulations on separate threads at once give the same results as one after another.
 #[test]
 fn separate_simulations_run_on_separate_threads() {

@@ -155,6 +155,8 @@ module rkmpm
       procedure :: add_material_neo_hookean => sim_add_material_neo_hookean
       procedure :: add_material_drucker_prager => sim_add_material_drucker_prager
       procedure :: add_material_johnson_cook => sim_add_material_johnson_cook
+      procedure :: add_material_rigid => sim_add_material_rigid
+      procedure :: set_contact => sim_set_contact
       procedure :: add_particles => sim_add_particles
       procedure :: add_boundary_points => sim_add_boundary_points
       procedure :: boundary_point_count => sim_boundary_point_count
@@ -344,6 +346,26 @@ module rkmpm
          type(rkmpm_johnson_cook), intent(in) :: parameters
          integer(c_int32_t), intent(out) :: out_id
       end function rkmpm_sim_add_material_johnson_cook
+
+      ! enum RkmpmStatus rkmpm_sim_add_material_rigid(struct RkmpmSim *sim, double density,
+      !                                              const double *velocity, uint32_t *out_id);
+      integer(c_int) function rkmpm_sim_add_material_rigid(sim, density, velocity, out_id) &
+         bind(C, name="rkmpm_sim_add_material_rigid")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: density
+         real(c_double), intent(in) :: velocity(*)
+         integer(c_int32_t), intent(out) :: out_id
+      end function rkmpm_sim_add_material_rigid
+
+      ! enum RkmpmStatus rkmpm_sim_set_contact(struct RkmpmSim *sim, uint32_t enabled, double friction);
+      integer(c_int) function rkmpm_sim_set_contact(sim, enabled, friction) &
+         bind(C, name="rkmpm_sim_set_contact")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: enabled
+         real(c_double), value :: friction
+      end function rkmpm_sim_set_contact
 
       ! enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim, uint32_t material, size_t count,
       !                                          const double *positions, const double *volumes,
@@ -817,6 +839,47 @@ contains
       if (present(errmsg)) errmsg = text
       id = out_id
    end subroutine sim_add_material_johnson_cook
+
+   !> Adds a rigid body moving with velocity(dim); needs set_contact.
+   subroutine sim_add_material_rigid(self, density, velocity, id, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: density
+      real(c_double), intent(in) :: velocity(:)
+      integer(c_int32_t), intent(out) :: id
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: out_id
+      out_id = -1
+      if (c_associated(self%h)) then
+         if (size(velocity) /= handle_dim(self%h)) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'add_material_rigid', stat, text, &
+                        'velocity must hold dim values')
+            if (present(errmsg)) errmsg = text
+            id = out_id
+            return
+         end if
+      end if
+      call report(rkmpm_sim_add_material_rigid(self%h, density, velocity, out_id), &
+                  'add_material_rigid', stat, text)
+      if (present(errmsg)) errmsg = text
+      id = out_id
+   end subroutine sim_add_material_rigid
+
+   !> Turns contact between bodies on (enabled = .true., Coulomb friction) or off.
+   subroutine sim_set_contact(self, enabled, friction, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      logical, intent(in) :: enabled
+      real(c_double), intent(in) :: friction
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: on
+      on = 0
+      if (enabled) on = 1
+      call report(rkmpm_sim_set_contact(self%h, on, friction), 'set_contact', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_contact
 
    !> Adds size(x, 2) particles of `material`: positions x(dim, n), volumes(n) and optional
    !> velocities(dim, n) (at rest when absent). All or nothing.

@@ -177,6 +177,10 @@ program error_handling
    jc%eos_enabled = 2
    call sim%add_material_johnson_cook(jc, mat3, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'Johnson-Cook eos flag 2')
+   call sim%set_contact(.true., -1.0_c_double, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'negative contact friction')
+   call sim%add_material_rigid(1000.0_c_double, [0.0_c_double], mat3, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'rigid velocity of the wrong length')
 
    ! ---- particles: an 8 x 8 block on [0.3, 0.7]^2 ----
    p = 0

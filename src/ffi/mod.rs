@@ -369,6 +369,54 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
     })
 }
 
+/// Turns contact between bodies on (`enabled` = 1, Coulomb `friction` >= 0) or off (0), before
+/// the first step. With contact every material is a body with its own grid velocity field
+/// (Bardenhagen et al. 2000): bodies meet without sticking, slide with friction `friction` and
+/// separate freely. Works with USL and material-point integration, without boundary points
+/// (else the first step returns `RKMPM_ERR_UNSUPPORTED`).
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_contact(
+    sim: *mut RkmpmSim,
+    enabled: u32,
+    friction: f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_contact", || {
+        let s = sim_mut(sim)?;
+        let on = flag("enabled", enabled)?;
+        with_sim!(&mut s.sim, m => m.set_contact(on.then_some(friction)))?;
+        Ok(())
+    })
+}
+
+/// Adds a rigid body material: `density` > 0 and the prescribed constant `velocity` (`dim`
+/// values). Its particles move with that velocity and do not deform; it needs contact
+/// (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
+///
+/// # Safety
+/// `sim` must be a live handle; `velocity` must hold `dim` values; `out_id` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_add_material_rigid(
+    sim: *mut RkmpmSim,
+    density: f64,
+    velocity: *const f64,
+    out_id: *mut u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_add_material_rigid", || {
+        let s = sim_mut(sim)?;
+        check_ptr("out_id", out_id)?;
+        let d = with_sim!(&s.sim, m => m.grid().cells.len());
+        let v = slice("velocity", velocity, d)?;
+        let mut v3 = [0.0; 3];
+        v3[..d].copy_from_slice(v);
+        let material = Material::rigid(density, v3)?;
+        let id = with_sim!(&mut s.sim, m => m.add_material(material));
+        write_out("out_id", out_id, id)
+    })
+}
+
 /// Chooses USL or MUSL (before the first step).
 ///
 /// # Safety

@@ -157,7 +157,10 @@ mod tests {
                     assert!((0.5 * (p + p.transpose()) - sigma).norm() < 1e-8)
                 }
                 // Hencky (the elastic law of Drucker–Prager) is hyperelastic too.
-                Material::NeoHookean(_) | Material::DruckerPrager(_) | Material::JohnsonCook(_) => {
+                Material::NeoHookean(_)
+                | Material::DruckerPrager(_)
+                | Material::JohnsonCook(_)
+                | Material::Rigid(_) => {
                     let j = f.determinant();
                     assert!((p * f.transpose() / j - sigma).norm() < 1e-8, "{m:?}");
                 }

@@ -41,6 +41,33 @@ pub enum Material {
     DruckerPrager(DruckerPrager),
     /// J2 plasticity with Johnson–Cook hardening and damage, optional Mie–Grüneisen EOS.
     JohnsonCook(JohnsonCook),
+    /// A rigid body moving with a prescribed constant velocity (needs contact).
+    Rigid(Rigid),
+}
+
+/// A rigid body: density (for its mass) and prescribed velocity (the first `dim` components).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rigid {
+    pub density: f64,
+    pub velocity: [f64; 3],
+}
+
+impl Constitutive for Rigid {
+    fn density(&self) -> f64 {
+        self.density
+    }
+    fn wave_speed(&self, _j: f64) -> f64 {
+        0.0
+    }
+    fn is_elastic(&self) -> bool {
+        true
+    }
+    fn cauchy_stress(&self, _f: &Matrix3<f64>) -> Matrix3<f64> {
+        Matrix3::zeros()
+    }
+    fn strain_energy_density(&self, _f: &Matrix3<f64>) -> f64 {
+        0.0
+    }
 }
 
 impl Material {
@@ -81,8 +108,27 @@ impl Material {
         Ok(Material::JohnsonCook(JohnsonCook::new(parameters)?))
     }
 
+    /// A rigid body of density `density` moving with `velocity` (only the first `dim` components
+    /// are used). Fails for a non-positive density or a non-finite velocity.
+    pub fn rigid(density: f64, velocity: [f64; 3]) -> Result<Self> {
+        crate::error::check_positive("density", density)?;
+        for v in velocity {
+            crate::error::check_finite("velocity", v)?;
+        }
+        Ok(Material::Rigid(Rigid { density, velocity }))
+    }
+
+    /// The prescribed velocity of a rigid body.
+    pub fn rigid_velocity<const D: usize>(&self) -> Option<crate::Vector<D>> {
+        match self {
+            Material::Rigid(r) => Some(crate::Vector::<D>::from_fn(|i, _| r.velocity[i])),
+            _ => None,
+        }
+    }
+
     fn model(&self) -> &dyn Constitutive {
         match self {
+            Material::Rigid(m) => m,
             Material::LinearElastic(m) => m,
             Material::NeoHookean(m) => m,
             Material::DruckerPrager(m) => m,
@@ -103,7 +149,7 @@ impl Material {
         match self {
             Material::DruckerPrager(m) => m.update(state, df, j),
             Material::JohnsonCook(m) => m.update(state, df, j, dt),
-            Material::LinearElastic(_) | Material::NeoHookean(_) => {
+            Material::LinearElastic(_) | Material::NeoHookean(_) | Material::Rigid(_) => {
                 unreachable!("elastic materials have no history")
             }
         }

@@ -80,14 +80,35 @@ pub fn velocity_gradient<const D: usize>(
     l
 }
 
+/// The grid fields particles read: one for all, or one per body under contact.
+#[derive(Clone, Copy)]
+pub enum Fields<'a, const D: usize> {
+    One(&'a GridNodes<D>),
+    /// Per-body fields and each particle's body (its material).
+    PerBody(&'a [GridNodes<D>], &'a [u32]),
+}
+
+impl<'a, const D: usize> Fields<'a, D> {
+    /// The field particle `p` reads.
+    #[inline]
+    pub fn of(&self, p: usize) -> &'a GridNodes<D> {
+        match *self {
+            Fields::One(n) => n,
+            Fields::PerBody(b, material) => &b[material[p] as usize],
+        }
+    }
+}
+
 /// Gathers the new velocity, affine matrix and position of every particle, and under USL its new
-/// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map).
+/// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map). Particles of
+/// a rigid material (`rigid[material]` is its velocity) move with it and keep their `F`.
 #[allow(clippy::too_many_arguments)]
 pub fn grid_to_particle<const D: usize>(
     grid: &Grid<D>,
     ps: &Particles<D>,
     stencils: &Stencils<D>,
-    nodes: &GridNodes<D>,
+    fields: Fields<'_, D>,
+    rigid: &[Option<Vector<D>>],
     plan: TransferPlan,
     dt: f64,
     update_deformation: bool,
@@ -96,8 +117,16 @@ pub fn grid_to_particle<const D: usize>(
     updates.resize(ps.len(), ParticleUpdate::default());
     let flip = plan.flip > 0.0;
     updates.par_iter_mut().enumerate().for_each(|(p, u)| {
-        let (ns, ws, gs) = stencils.of(p);
         let xp = ps.position[p];
+        if let Some(v) = rigid.get(ps.material[p] as usize).copied().flatten() {
+            u.position = xp + dt * v;
+            u.velocity = v;
+            u.affine = Matrix::zeros();
+            u.deformation_gradient = ps.deformation_gradient[p];
+            return;
+        }
+        let nodes = fields.of(p);
+        let (ns, ws, gs) = stencils.of(p);
         let mut v_pic = Vector::<D>::zeros();
         let mut dv = Vector::<D>::zeros();
         let mut b = Matrix::<D>::zeros();

@@ -15,7 +15,7 @@ mod grid_to_particle;
 mod grid_update;
 mod particle_to_grid;
 
-pub use grid_to_particle::{grid_to_particle, velocity_gradient, ParticleUpdate};
+pub use grid_to_particle::{grid_to_particle, velocity_gradient, Fields, ParticleUpdate};
 pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
 
@@ -38,6 +38,10 @@ pub struct Workspace<const D: usize> {
     pub volumes: Vec<f64>,
     pub boundary_updates: Vec<BoundaryUpdate<D>>,
     pub nodes: GridNodes<D>,
+    /// One node field per body (material) under contact; empty otherwise.
+    pub bodies: Vec<GridNodes<D>>,
+    /// Nodes touched by more than one body this step (contact).
+    pub shared: Vec<usize>,
     pub body_acceleration: Vec<Vector<D>>,
     pub updates: Vec<ParticleUpdate<D>>,
 }
@@ -99,6 +103,9 @@ impl<const D: usize> Sim<D> {
         }
         let result = self.advance(dt);
         self.work.nodes.reset();
+        for b in self.work.bodies.iter_mut() {
+            b.reset();
+        }
         if result.is_err() && generate {
             // A rejected step leaves everything as it was, the boundary points included.
             self.boundary = BoundaryPoints::default();
@@ -113,6 +120,28 @@ impl<const D: usize> Sim<D> {
     /// Refuses combinations of options that cannot run.
     fn check_options(&self) -> Result<()> {
         self.options.walls.check_fits(&self.grid)?;
+        if self.options.contact.is_some()
+            && (self.vc.is_some()
+                || !self.boundary.is_empty()
+                || self.options.scheme == Scheme::Musl)
+        {
+            return Err(Error::new(
+                ErrorKind::Unsupported,
+                "contact works with USL and material-point integration, without boundary points \
+                 (VC, MUSL and tractions are not supported with contact yet)",
+            ));
+        }
+        if self.options.contact.is_none()
+            && self
+                .materials
+                .iter()
+                .any(|m| m.rigid_velocity::<D>().is_some())
+        {
+            return Err(Error::new(
+                ErrorKind::Unsupported,
+                "a rigid material needs contact (rkmpm_sim_set_contact)",
+            ));
+        }
         if matches!(self.options.transfer, Transfer::Apic) && self.shape.reproduction_order() >= 2 {
             // D_p = Σ Ψ (x_I − x_p)(x_I − x_p)ᵀ vanishes for shape functions that reproduce
             // quadratics, and replacing it by the velocity gradient amplifies the round trip
@@ -153,6 +182,20 @@ impl<const D: usize> Sim<D> {
         work.nodes.set_lumping(self.shape.is_signed());
         if work.nodes.mass.len() != grid.node_count() {
             work.nodes.resize(grid);
+        }
+        let contact = self.options.contact;
+        let rigid: Vec<Option<Vector<D>>> =
+            self.materials.iter().map(|m| m.rigid_velocity()).collect();
+        if contact.is_some() {
+            work.bodies
+                .resize_with(self.materials.len(), GridNodes::default);
+            for b in work.bodies.iter_mut() {
+                b.set_lumping(self.shape.is_signed());
+                if b.mass.len() != grid.node_count() {
+                    b.resize(grid);
+                }
+                b.set_mass_gradient(true);
+            }
         }
 
         // 1. Shape functions, once per particle.
@@ -209,45 +252,93 @@ impl<const D: usize> Sim<D> {
             );
         }
 
-        // 3. Particle to grid.
+        // 3. Particle to grid (one field, or one per body under contact).
         let velocity = |p: usize| ps.velocity[p];
         let affine = |p: usize| ps.affine[p];
-        particle_to_grid(
-            grid,
-            ps,
-            &work.stencils,
-            &velocity,
-            plan.apic
-                .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
-            Some(Forces {
-                gravity: self.options.gravity,
-                body,
-                vc: self.vc.as_ref(),
-            }),
-            &mut work.nodes,
-        );
-        if boundary.has_tractions() {
-            apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
-        }
-
-        // 4. Grid update with the wall conditions.
+        let forces = Forces {
+            gravity: self.options.gravity,
+            body,
+            vc: self.vc.as_ref(),
+        };
+        let affine_map = plan
+            .apic
+            .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync));
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
-        grid_update(
-            grid,
-            &self.options.walls,
-            &mut work.nodes,
-            Some(dt),
-            mass_floor,
-        );
+        if let Some(contact) = contact {
+            for (b, nodes) in work.bodies.iter_mut().enumerate() {
+                particle_to_grid(
+                    grid,
+                    ps,
+                    &work.stencils,
+                    &velocity,
+                    affine_map,
+                    Some(forces),
+                    Some(b as u32),
+                    nodes,
+                );
+                // 4. Grid update per body, then the contact correction where bodies meet.
+                grid_update(grid, &self.options.walls, nodes, Some(dt), mass_floor);
+                if let Some(v) = rigid[b] {
+                    for &n in &nodes.active {
+                        nodes.velocity[n] = v;
+                        nodes.velocity_old[n] = v;
+                    }
+                }
+            }
+            work.shared.clear();
+            for &n in &work.bodies[0].active {
+                if work.bodies[1..].iter().any(|b| b.is_touched(n)) {
+                    work.shared.push(n);
+                }
+            }
+            for (k, body) in work.bodies.iter().enumerate().skip(1) {
+                for &n in &body.active {
+                    if !work.bodies[..k].iter().any(|b| b.is_touched(n))
+                        && work.bodies[k + 1..].iter().any(|b| b.is_touched(n))
+                    {
+                        work.shared.push(n);
+                    }
+                }
+            }
+            crate::contact::correct_velocities(&contact, &mut work.bodies, &rigid, &work.shared);
+        } else {
+            particle_to_grid(
+                grid,
+                ps,
+                &work.stencils,
+                &velocity,
+                affine_map,
+                Some(forces),
+                None,
+                &mut work.nodes,
+            );
+            if boundary.has_tractions() {
+                apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
+            }
+            // 4. Grid update with the wall conditions.
+            grid_update(
+                grid,
+                &self.options.walls,
+                &mut work.nodes,
+                Some(dt),
+                mass_floor,
+            );
+        }
 
         // 5. Grid to particle.
         let mut updates = std::mem::take(&mut work.updates);
         let usl = self.options.scheme == Scheme::Usl;
+        let fields = if contact.is_some() {
+            Fields::PerBody(&work.bodies, &ps.material)
+        } else {
+            Fields::One(&work.nodes)
+        };
         grid_to_particle(
             grid,
             ps,
             &work.stencils,
-            &work.nodes,
+            fields,
+            &rigid,
             plan,
             dt,
             usl,
@@ -271,6 +362,7 @@ impl<const D: usize> Sim<D> {
                 &velocity,
                 plan.apic
                     .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+                None,
                 None,
                 &mut work.nodes,
             );

@@ -27,7 +27,10 @@ pub struct Forces<'a, const D: usize> {
 ///   particle's own, or the updated ones in the second map of MUSL).
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
 ///
+/// * `body`: with contact, only the particles of this material map (to its own field).
+///
 /// Serial in particle order, so the sums do not depend on the thread count.
+#[allow(clippy::too_many_arguments)]
 pub fn particle_to_grid<const D: usize>(
     grid: &Grid<D>,
     ps: &Particles<D>,
@@ -35,9 +38,14 @@ pub fn particle_to_grid<const D: usize>(
     velocity: &(dyn Fn(usize) -> Vector<D> + Sync),
     affine: Option<&(dyn Fn(usize) -> Matrix<D> + Sync)>,
     forces: Option<Forces<D>>,
+    body: Option<u32>,
     nodes: &mut GridNodes<D>,
 ) {
+    let with_gradient = !nodes.mass_gradient.is_empty() && forces.is_some();
     for p in 0..ps.len() {
+        if body.is_some_and(|b| ps.material[p] != b) {
+            continue;
+        }
         let (ns, ws, gs) = stencils.of(p);
         let lumping = stencils.lumping_of(p);
         let m = ps.mass[p];
@@ -78,6 +86,9 @@ pub fn particle_to_grid<const D: usize>(
                     None => gs[s],
                 };
                 nodes.mass[n] += m * w;
+                if with_gradient {
+                    nodes.mass_gradient[n] += m * gs[s];
+                }
                 nodes.force[n] += vs * grad;
                 if nodes.lumping.is_none() {
                     nodes.force[n] += (m * w) * b;
