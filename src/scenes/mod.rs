@@ -200,3 +200,6 @@ pub use collapse::{deposit_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUK
 
 mod taylor;
 pub use taylor::{TaylorBar, TaylorCase, TaylorResult};
+
+mod penetration;
+pub use penetration::{weldox_460e, Penetration, PenetrationResult};
