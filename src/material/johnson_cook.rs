@@ -72,6 +72,32 @@ pub struct JohnsonCookParameters {
     pub eos: Option<MieGruneisen>,
 }
 
+/// OFHC copper: Johnson–Cook strength (Johnson & Cook 1983) and damage (Johnson & Cook 1985)
+/// constants, and the Mie–Grüneisen EOS of copper (c0 = 3940 m/s, s = 1.49, Γ0 = 1.96).
+pub fn ofhc_copper() -> JohnsonCookParameters {
+    JohnsonCookParameters {
+        density: 8960.0,
+        young: 124e9,
+        poisson: 0.34,
+        a: 90e6,
+        b: 292e6,
+        n: 0.31,
+        c: 0.025,
+        reference_strain_rate: 1.0,
+        m: 1.09,
+        room_temperature: 298.0,
+        melt_temperature: 1356.0,
+        specific_heat: 383.0,
+        taylor_quinney: 0.9,
+        damage: Some([0.54, 4.89, -3.03, 0.014, 1.12]),
+        eos: Some(MieGruneisen {
+            sound_speed: 3940.0,
+            slope: 1.49,
+            gamma0: 1.96,
+        }),
+    }
+}
+
 /// J2 plasticity with Johnson–Cook hardening, damage and (optionally) Mie–Grüneisen pressure.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JohnsonCook {
@@ -282,28 +308,13 @@ impl JohnsonCook {
 mod tests {
     use super::*;
 
-    /// OFHC copper (Johnson & Cook 1983, 1985), Mie–Grüneisen of copper.
+    /// OFHC copper with or without damage and EOS.
     pub fn copper(damage: bool, eos: bool) -> JohnsonCook {
+        let p = ofhc_copper();
         JohnsonCook::new(JohnsonCookParameters {
-            density: 8960.0,
-            young: 124e9,
-            poisson: 0.34,
-            a: 90e6,
-            b: 292e6,
-            n: 0.31,
-            c: 0.025,
-            reference_strain_rate: 1.0,
-            m: 1.09,
-            room_temperature: 298.0,
-            melt_temperature: 1356.0,
-            specific_heat: 383.0,
-            taylor_quinney: 0.9,
-            damage: damage.then_some([0.54, 4.89, -3.03, 0.014, 1.12]),
-            eos: eos.then_some(MieGruneisen {
-                sound_speed: 3940.0,
-                slope: 1.49,
-                gamma0: 1.96,
-            }),
+            damage: p.damage.filter(|_| damage),
+            eos: p.eos.filter(|_| eos),
+            ..p
         })
         .unwrap()
     }

@@ -10,7 +10,7 @@ mod johnson_cook;
 mod plastic;
 
 pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
-pub use johnson_cook::{JohnsonCook, JohnsonCookParameters, MieGruneisen};
+pub use johnson_cook::{ofhc_copper, JohnsonCook, JohnsonCookParameters, MieGruneisen};
 pub use plastic::{DruckerPrager, PlasticState};
 
 use crate::error::Result;

@@ -165,20 +165,8 @@ impl GranularColumn {
         let h0 = self.aspect * self.width;
         let t_end = self.duration * (h0 / self.gravity).sqrt();
         let mass0: f64 = sim.particles().mass.iter().sum();
-        let start = std::time::Instant::now();
-        let mut next_frame = 0;
-        while sim.time() < t_end {
-            if frames > 0 && sim.time() >= next_frame as f64 * t_end / frames as f64 {
-                on_frame(&sim)?;
-                next_frame += 1;
-            }
-            let dt = sim.stable_dt(0.3)?.min(t_end - sim.time() + 1e-12);
-            sim.step(dt)?;
-        }
-        if frames > 0 {
-            on_frame(&sim)?;
-        }
-        let seconds = start.elapsed().as_secs_f64();
+        let seconds =
+            super::run_with_frames(&mut sim, t_end, 0.3, frames, &mut on_frame, &|_| false)?;
         let q = sim.grid().cell_size / 2.0;
         let ps = sim.particles();
         let runout = deposit_front(&ps.position, q);

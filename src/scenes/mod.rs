@@ -195,6 +195,37 @@ pub fn run_vibrating_bar<const D: usize>(
     })
 }
 
+/// Steps `sim` to `t_end` at `cfl` times the stable step, calling `on_frame` at the start,
+/// `frames` times evenly over the run and at the end (none when `frames` is 0), and stopping
+/// early after a step where `stop(sim)` holds. Returns the wall time in seconds.
+pub fn run_with_frames<const D: usize>(
+    sim: &mut Sim<D>,
+    t_end: f64,
+    cfl: f64,
+    frames: usize,
+    on_frame: &mut dyn FnMut(&Sim<D>) -> Result<()>,
+    stop: &dyn Fn(&Sim<D>) -> bool,
+) -> Result<f64> {
+    let start = std::time::Instant::now();
+    let mut next_frame = 0;
+    while sim.time() < t_end {
+        if frames > 0 && sim.time() >= next_frame as f64 * t_end / frames as f64 {
+            on_frame(sim)?;
+            next_frame += 1;
+        }
+        // The last step lands on t_end (the small excess keeps round-off from adding a step).
+        let dt = sim.stable_dt(cfl)?.min(t_end - sim.time() + 1e-12 * t_end);
+        sim.step(dt)?;
+        if stop(sim) {
+            break;
+        }
+    }
+    if frames > 0 {
+        on_frame(sim)?;
+    }
+    Ok(start.elapsed().as_secs_f64())
+}
+
 mod collapse;
 pub use collapse::{deposit_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 

@@ -166,24 +166,18 @@ impl Penetration {
         mut on_frame: impl FnMut(&Sim<D>) -> Result<()>,
     ) -> Result<(PenetrationResult, Sim<D>)> {
         let mut sim = self.build::<D>()?;
-        let start = std::time::Instant::now();
-        let mut next = 0;
-        while sim.time() < self.duration {
-            if frames > 0 && sim.time() >= next as f64 * self.duration / frames as f64 {
-                on_frame(&sim)?;
-                next += 1;
-            }
-            let dt = sim.stable_dt(0.3)?.min(self.duration - sim.time() + 1e-15);
-            sim.step(dt)?;
+        let near_bottom = |sim: &Sim<D>| {
             let floor = 2.0 * sim.grid().cell_size;
-            if sim.particles().position.iter().any(|x| x[D - 1] < floor) {
-                break;
-            }
-        }
-        if frames > 0 {
-            on_frame(&sim)?;
-        }
-        let seconds = start.elapsed().as_secs_f64();
+            sim.particles().position.iter().any(|x| x[D - 1] < floor)
+        };
+        let seconds = super::run_with_frames(
+            &mut sim,
+            self.duration,
+            0.3,
+            frames,
+            &mut on_frame,
+            &near_bottom,
+        )?;
         let back = 4.0 * self.plate_thickness;
         let ps = sim.particles();
         let (mut vsum, mut msum, mut lowest) = (0.0, 0.0, f64::INFINITY);

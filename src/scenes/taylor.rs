@@ -63,25 +63,8 @@ impl TaylorCase {
                 eos: None,
             },
             TaylorCase::OfhcCopper => JohnsonCookParameters {
-                density: 8960.0,
-                young: 124e9,
-                poisson: 0.34,
-                a: 90e6,
-                b: 292e6,
-                n: 0.31,
-                c: 0.025,
-                reference_strain_rate: 1.0,
-                m: 1.09,
-                room_temperature: 298.0,
-                melt_temperature: 1356.0,
-                specific_heat: 383.0,
-                taylor_quinney: 0.9,
                 damage: None,
-                eos: Some(crate::material::MieGruneisen {
-                    sound_speed: 3940.0,
-                    slope: 1.49,
-                    gamma0: 1.96,
-                }),
+                ..crate::material::ofhc_copper()
             },
         }
     }
@@ -181,20 +164,8 @@ impl TaylorBar {
         let mut sim = self.build()?;
         let (_, _, _, t_end) = self.case.geometry();
         let ke0 = sim.particles().kinetic_energy();
-        let start = std::time::Instant::now();
-        let mut next_frame = 0;
-        while sim.time() < t_end {
-            if frames > 0 && sim.time() >= next_frame as f64 * t_end / frames as f64 {
-                on_frame(&sim)?;
-                next_frame += 1;
-            }
-            let dt = sim.stable_dt(self.cfl)?.min(t_end - sim.time() + 1e-15);
-            sim.step(dt)?;
-        }
-        if frames > 0 {
-            on_frame(&sim)?;
-        }
-        let seconds = start.elapsed().as_secs_f64();
+        let seconds =
+            super::run_with_frames(&mut sim, t_end, self.cfl, frames, &mut on_frame, &|_| false)?;
         let q = sim.grid().cell_size / 2.0;
         let ps = sim.particles();
         let final_length = ps.position.iter().map(|x| x[2]).fold(0.0, f64::max) + q / 2.0;
