@@ -80,6 +80,8 @@ pub struct TaylorBar {
     pub integration: Integration,
     pub transfer: Transfer,
     pub cfl: f64,
+    /// Replaces the case's material (for sensitivity studies).
+    pub material: Option<JohnsonCookParameters>,
 }
 
 impl Default for TaylorBar {
@@ -91,6 +93,7 @@ impl Default for TaylorBar {
             integration: Integration::MaterialPoint,
             transfer: Transfer::Apic,
             cfl: 0.3,
+            material: None,
         }
     }
 }
@@ -127,7 +130,9 @@ impl TaylorBar {
         for axis in 0..3 {
             sim.set_boundary(axis, Side::Low, Boundary::Slip)?;
         }
-        let mat = sim.add_material(Material::johnson_cook(self.case.material())?);
+        let mat = sim.add_material(Material::johnson_cook(
+            self.material.unwrap_or(self.case.material()),
+        )?);
         let q = h / 2.0;
         let (nr, nz) = ((r0 / q).round() as usize, (l0 / q).round() as usize);
         let mut x = Vec::new();
