@@ -26,6 +26,8 @@ pub enum ErrorKind {
     Io,
     /// The feature is not available in this build.
     Unsupported,
+    /// A checkpoint file is truncated, damaged or not a checkpoint.
+    CorruptFile,
 }
 
 /// An error with its kind and a human-readable message.

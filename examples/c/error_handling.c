@@ -246,8 +246,8 @@ int main(void) {
   EXPECT(rkmpm_version() != NULL && rkmpm_version()[0] != '\0', "empty version string");
   printf("rkmpm %s, ABI %u\n", rkmpm_version(), (unsigned)rkmpm_abi_version());
 
-  const char *names[14];
-  for (int32_t s = 0; s <= 13; ++s) {
+  const char *names[15];
+  for (int32_t s = 0; s <= 14; ++s) {
     names[s] = rkmpm_status_str(s);
     EXPECT(names[s] != NULL && names[s][0] != '\0', "status %d has no string", (int)s);
     if (names[s] == NULL) {

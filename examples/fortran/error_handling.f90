@@ -181,6 +181,8 @@ program error_handling
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'negative contact friction')
    call sim%add_material_rigid(1000.0_c_double, [0.0_c_double], mat3, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'rigid velocity of the wrong length')
+   call sim%load('/nonexistent-dir/x.rkmpm', stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_STATE, msg, 'load into an initialized object')
 
    ! ---- particles: an 8 x 8 block on [0.3, 0.7]^2 ----
    p = 0
@@ -254,6 +256,17 @@ program error_handling
    call sim%set_transfer(RKMPM_TRANSFER_PIC_FLIP, flip_ratio=0.95_c_double, stat=st, errmsg=msg)
    call expect(st, RKMPM_OK, msg, 'PIC/FLIP 0.95')
    call sim%get_particles(RKMPM_FIELD_POSITION, pos)
+   ! ---- checkpoint: save, load into another object, same particle count and step count ----
+   call sim%save('error_handling_f.rkmpm', stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'save a checkpoint')
+   call unused%load('error_handling_f.rkmpm', stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'load the checkpoint')
+   call expect_true(unused%particle_count() == sim%particle_count(), 'the loaded copy has the same particles')
+   call expect_true(unused%step_count() == sim%step_count(), 'the loaded copy has the same step count')
+   call unused%free()
+   call unused%load('/nonexistent-dir/x.rkmpm', stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_IO, msg, 'load a missing file')
+   call expect_true(.not. unused%is_initialized(), 'a failed load leaves no simulation')
    call sim%step(10*critical, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_UNSTABLE_TIME_STEP, msg, 'dt = 10 x critical')
    call sim%step(-dt, stat=st, errmsg=msg)

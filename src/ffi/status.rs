@@ -35,10 +35,12 @@ pub enum RkmpmStatus {
     RKMPM_ERR_UNSUPPORTED = 12,
     /// An internal error (a caught panic); please report it.
     RKMPM_ERR_PANIC = 13,
+    /// A checkpoint file is truncated, damaged (checksum) or not a checkpoint.
+    RKMPM_ERR_CORRUPT_FILE = 14,
 }
 
 impl RkmpmStatus {
-    pub const ALL: [RkmpmStatus; 14] = [
+    pub const ALL: [RkmpmStatus; 15] = [
         RkmpmStatus::RKMPM_OK,
         RkmpmStatus::RKMPM_ERR_NULL_POINTER,
         RkmpmStatus::RKMPM_ERR_INVALID_ARGUMENT,
@@ -53,6 +55,7 @@ impl RkmpmStatus {
         RkmpmStatus::RKMPM_ERR_IO,
         RkmpmStatus::RKMPM_ERR_UNSUPPORTED,
         RkmpmStatus::RKMPM_ERR_PANIC,
+        RkmpmStatus::RKMPM_ERR_CORRUPT_FILE,
     ];
 
     /// A NUL-terminated static description.
@@ -72,6 +75,7 @@ impl RkmpmStatus {
             RkmpmStatus::RKMPM_ERR_IO => "input/output error\0",
             RkmpmStatus::RKMPM_ERR_UNSUPPORTED => "not supported\0",
             RkmpmStatus::RKMPM_ERR_PANIC => "internal error (panic)\0",
+            RkmpmStatus::RKMPM_ERR_CORRUPT_FILE => "corrupt checkpoint file\0",
         }
     }
 }
@@ -89,6 +93,7 @@ impl From<ErrorKind> for RkmpmStatus {
             ErrorKind::Callback => RkmpmStatus::RKMPM_ERR_CALLBACK,
             ErrorKind::Io => RkmpmStatus::RKMPM_ERR_IO,
             ErrorKind::Unsupported => RkmpmStatus::RKMPM_ERR_UNSUPPORTED,
+            ErrorKind::CorruptFile => RkmpmStatus::RKMPM_ERR_CORRUPT_FILE,
         }
     }
 }

@@ -1,3 +1,21 @@
-//! Output files.
+//! Files: particle output (VTK) and checkpoints.
 
+pub mod checkpoint;
 pub mod vtk;
+
+use crate::error::Result;
+use std::path::{Path, PathBuf};
+
+/// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so a
+/// reader never sees a half-written file and an existing file is replaced only by a complete one.
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    if let Err(e) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e.into());
+    }
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}

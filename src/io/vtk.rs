@@ -8,15 +8,7 @@ use crate::sim::Sim;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Writes `text` to `path` through a temporary file in the same directory.
-fn write_atomically(path: &Path, text: &str) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text)?;
-    std::fs::rename(&tmp, path)?;
-    Ok(())
-}
+use super::write_atomically;
 
 fn data_array(out: &mut String, name: &str, components: usize, values: impl Iterator<Item = f64>) {
     let _ = writeln!(
@@ -102,7 +94,7 @@ pub fn particles_vtu<const D: usize>(sim: &Sim<D>) -> String {
 
 /// Writes the particles of `sim` to one `.vtu` file.
 pub fn write_particles<const D: usize>(sim: &Sim<D>, path: impl AsRef<Path>) -> Result<()> {
-    write_atomically(path.as_ref(), &particles_vtu(sim))
+    write_atomically(path.as_ref(), particles_vtu(sim).as_bytes())
 }
 
 /// A time series: frames `<prefix>_00000.vtu, …` and the collection `<prefix>.pvd` that lists
@@ -152,7 +144,7 @@ impl VtkSeries {
         pvd.push_str("</Collection>\n</VTKFile>\n");
         let mut pvd_path = self.prefix.clone().into_os_string();
         pvd_path.push(".pvd");
-        write_atomically(Path::new(&pvd_path), &pvd)?;
+        write_atomically(Path::new(&pvd_path), pvd.as_bytes())?;
         Ok(path)
     }
 }

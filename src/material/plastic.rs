@@ -111,6 +111,34 @@ impl DruckerPrager {
         })
     }
 
+    /// Number of stored constants besides the elastic ones (for checkpoints).
+    pub(crate) const STORED: usize = 6;
+
+    /// The constants as stored, derived ones included, so a restored model is bit-identical.
+    pub(crate) fn stored_constants(&self) -> [f64; Self::STORED] {
+        [
+            self.friction,
+            self.cohesion,
+            self.dilatancy,
+            self.alpha_friction,
+            self.alpha_dilatancy,
+            self.k_cohesion,
+        ]
+    }
+
+    /// The inverse of [`DruckerPrager::stored_constants`].
+    pub(crate) fn from_stored(elastic: ElasticConstants, c: &[f64]) -> Self {
+        DruckerPrager {
+            elastic,
+            friction: c[0],
+            cohesion: c[1],
+            dilatancy: c[2],
+            alpha_friction: c[3],
+            alpha_dilatancy: c[4],
+            k_cohesion: c[5],
+        }
+    }
+
     /// The yield function `α_φ I1 + sqrt(J2) − k_c` of a principal Kirchhoff stress.
     pub fn yield_function(&self, tau: &Vector3<f64>) -> f64 {
         let i1 = tau.sum();

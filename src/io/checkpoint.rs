@@ -1,0 +1,575 @@
+//! Checkpoint and restart: the whole state of a simulation in one versioned, checksummed binary
+//! file, so that a run stopped, saved, loaded and continued gives the same particle data bit for
+//! bit as the uninterrupted run.
+//!
+//! Layout (little-endian): the magic `RKMPMCHK`, the format version (`u32`), the dimension
+//! (`u32`), the payload length (`u64`), the payload, and the CRC-32 of the payload (`u32`). The
+//! payload holds the grid, the options, the materials (every stored field, derived constants
+//! included, so nothing is recomputed differently), the particles, the boundary points, the time
+//! and the step count. It does not hold the body-force callback (set it again after loading) or
+//! any scratch space (every step rebuilds it).
+//!
+//! Files are written to a temporary name and renamed: an existing checkpoint is replaced only by
+//! a complete new one. A file that is truncated, has another magic, or fails its checksum is
+//! refused with `CorruptFile`; a newer format version with `Unsupported`.
+
+use crate::boundary::{Boundary, Walls};
+use crate::contact::Contact;
+use crate::error::{Error, ErrorKind, Result};
+use crate::integration::BoundaryPoints;
+use crate::material::{
+    DruckerPrager, ElasticConstants, JohnsonCook, JohnsonCookParameters, LinearElastic, Material,
+    MieGruneisen, NeoHookean, PlasticState, Rigid,
+};
+use crate::particles::Particles;
+use crate::shape::Shape;
+use crate::sim::{Integration, Scheme, Sim, Transfer};
+use crate::{Matrix, Vector};
+use nalgebra::Matrix3;
+use std::path::Path;
+
+const MAGIC: &[u8; 8] = b"RKMPMCHK";
+/// Format version written by this build.
+pub const CHECKPOINT_VERSION: u32 = 1;
+
+fn corrupt(what: impl Into<String>) -> Error {
+    Error::new(ErrorKind::CorruptFile, what)
+}
+
+/// Little-endian writer of the payload.
+#[derive(Default)]
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f64s<'a>(&mut self, v: impl IntoIterator<Item = &'a f64>) {
+        for x in v {
+            self.f64(*x);
+        }
+    }
+    fn len(&mut self, n: usize) {
+        self.u64(n as u64);
+    }
+    fn vectors<const D: usize>(&mut self, v: &[Vector<D>]) {
+        self.len(v.len());
+        v.iter().for_each(|x| self.f64s(x.iter()));
+    }
+    fn matrices<const D: usize>(&mut self, v: &[Matrix<D>]) {
+        self.len(v.len());
+        v.iter().for_each(|x| self.f64s(x.iter()));
+    }
+    fn scalars(&mut self, v: &[f64]) {
+        self.len(v.len());
+        self.f64s(v);
+    }
+}
+
+/// Reader of the payload; every read fails cleanly at the end of the data.
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> Result<&[u8]> {
+        if self.0.len() < n {
+            return Err(corrupt("the checkpoint ends early"));
+        }
+        let (head, tail) = self.0.split_at(n);
+        self.0 = tail;
+        Ok(head)
+    }
+    fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(
+            self.take(4)?.try_into().expect("4 bytes"),
+        ))
+    }
+    fn u64(&mut self) -> Result<u64> {
+        Ok(u64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
+    }
+    fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_le_bytes(
+            self.take(8)?.try_into().expect("8 bytes"),
+        ))
+    }
+    /// A length, refused when the remaining data cannot hold `n` items of `item` bytes.
+    fn len(&mut self, item: usize) -> Result<usize> {
+        let n = self.u64()?;
+        if n > (self.0.len() / item.max(1)) as u64 {
+            return Err(corrupt(format!("a stored length ({n}) exceeds the file")));
+        }
+        Ok(n as usize)
+    }
+    fn vectors<const D: usize>(&mut self) -> Result<Vec<Vector<D>>> {
+        let n = self.len(8 * D)?;
+        (0..n)
+            .map(|_| {
+                let mut v = Vector::<D>::zeros();
+                for c in v.iter_mut() {
+                    *c = self.f64()?;
+                }
+                Ok(v)
+            })
+            .collect()
+    }
+    fn matrices<const D: usize>(&mut self) -> Result<Vec<Matrix<D>>> {
+        let n = self.len(8 * D * D)?;
+        (0..n)
+            .map(|_| {
+                let mut m = Matrix::<D>::zeros();
+                for c in m.iter_mut() {
+                    *c = self.f64()?;
+                }
+                Ok(m)
+            })
+            .collect()
+    }
+    fn scalars(&mut self) -> Result<Vec<f64>> {
+        let n = self.len(8)?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+}
+
+fn write_elastic(w: &mut Writer, e: &ElasticConstants) {
+    w.f64s(&[e.density, e.young, e.poisson, e.lambda, e.mu]);
+}
+
+fn read_elastic(r: &mut Reader) -> Result<ElasticConstants> {
+    Ok(ElasticConstants {
+        density: r.f64()?,
+        young: r.f64()?,
+        poisson: r.f64()?,
+        lambda: r.f64()?,
+        mu: r.f64()?,
+    })
+}
+
+fn write_material(w: &mut Writer, m: &Material) {
+    match m {
+        Material::LinearElastic(LinearElastic(e)) => {
+            w.u32(0);
+            write_elastic(w, e);
+        }
+        Material::NeoHookean(NeoHookean(e)) => {
+            w.u32(1);
+            write_elastic(w, e);
+        }
+        Material::DruckerPrager(dp) => {
+            w.u32(2);
+            write_elastic(w, &dp.elastic);
+            w.f64s(&dp.stored_constants());
+        }
+        Material::JohnsonCook(jc) => {
+            w.u32(3);
+            write_elastic(w, &jc.elastic);
+            let p = &jc.p;
+            w.f64s(&[
+                p.density,
+                p.young,
+                p.poisson,
+                p.a,
+                p.b,
+                p.n,
+                p.c,
+                p.reference_strain_rate,
+                p.m,
+                p.room_temperature,
+                p.melt_temperature,
+                p.specific_heat,
+                p.taylor_quinney,
+            ]);
+            w.u32(u32::from(p.damage.is_some()));
+            w.f64s(&p.damage.unwrap_or_default());
+            let eos = p
+                .eos
+                .map_or([0.0; 3], |e| [e.sound_speed, e.slope, e.gamma0]);
+            w.u32(u32::from(p.eos.is_some()));
+            w.f64s(&eos);
+        }
+        Material::Rigid(rigid) => {
+            w.u32(4);
+            w.f64(rigid.density);
+            w.f64s(&rigid.velocity);
+        }
+    }
+}
+
+fn read_material(r: &mut Reader) -> Result<Material> {
+    let tag = r.u32()?;
+    let read_n =
+        |n: usize, r: &mut Reader| -> Result<Vec<f64>> { (0..n).map(|_| r.f64()).collect() };
+    Ok(match tag {
+        0 => Material::LinearElastic(LinearElastic(read_elastic(r)?)),
+        1 => Material::NeoHookean(NeoHookean(read_elastic(r)?)),
+        2 => {
+            let e = read_elastic(r)?;
+            let c = read_n(DruckerPrager::STORED, r)?;
+            Material::DruckerPrager(DruckerPrager::from_stored(e, &c))
+        }
+        3 => {
+            let elastic = read_elastic(r)?;
+            let v = read_n(13, r)?;
+            let damage_on = r.u32()?;
+            let d = read_n(5, r)?;
+            let eos_on = r.u32()?;
+            let e = read_n(3, r)?;
+            Material::JohnsonCook(JohnsonCook {
+                elastic,
+                p: JohnsonCookParameters {
+                    density: v[0],
+                    young: v[1],
+                    poisson: v[2],
+                    a: v[3],
+                    b: v[4],
+                    n: v[5],
+                    c: v[6],
+                    reference_strain_rate: v[7],
+                    m: v[8],
+                    room_temperature: v[9],
+                    melt_temperature: v[10],
+                    specific_heat: v[11],
+                    taylor_quinney: v[12],
+                    damage: (damage_on == 1).then(|| [d[0], d[1], d[2], d[3], d[4]]),
+                    eos: (eos_on == 1).then_some(MieGruneisen {
+                        sound_speed: e[0],
+                        slope: e[1],
+                        gamma0: e[2],
+                    }),
+                },
+            })
+        }
+        4 => {
+            let density = r.f64()?;
+            let v = read_n(3, r)?;
+            Material::Rigid(Rigid {
+                density,
+                velocity: [v[0], v[1], v[2]],
+            })
+        }
+        other => return Err(corrupt(format!("unknown material tag {other}"))),
+    })
+}
+
+fn write_options<const D: usize>(w: &mut Writer, sim: &Sim<D>) {
+    let o = &sim.options;
+    match o.shape {
+        Shape::Linear => w.u32(0),
+        Shape::BSpline2 => w.u32(1),
+        Shape::BSpline3 => w.u32(2),
+        Shape::Rk { order, support } => {
+            w.u32(3);
+            w.u32(order);
+            w.f64(support);
+        }
+    }
+    match o.integration {
+        Integration::MaterialPoint => w.u32(0),
+        Integration::Vc { order } => {
+            w.u32(1);
+            w.u32(order);
+        }
+    }
+    match o.transfer {
+        Transfer::PicFlip { flip } => {
+            w.u32(0);
+            w.f64(flip);
+        }
+        Transfer::Apic => w.u32(1),
+    }
+    w.u32(match o.scheme {
+        Scheme::Usl => 0,
+        Scheme::Musl => 1,
+    });
+    w.f64s(o.gravity.iter());
+    for face in o.walls.faces.iter().flatten() {
+        let (tag, mu) = match *face {
+            Boundary::Free => (0, 0.0),
+            Boundary::Fixed => (1, 0.0),
+            Boundary::Slip => (2, 0.0),
+            Boundary::Friction(mu) => (3, mu),
+        };
+        w.u32(tag);
+        w.f64(mu);
+    }
+    w.u32(u32::from(o.contact.is_some()));
+    w.f64(o.contact.map_or(0.0, |c| c.friction));
+}
+
+fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> {
+    let shape = match r.u32()? {
+        0 => Shape::Linear,
+        1 => Shape::BSpline2,
+        2 => Shape::BSpline3,
+        3 => Shape::Rk {
+            order: r.u32()?,
+            support: r.f64()?,
+        },
+        other => return Err(corrupt(format!("unknown shape tag {other}"))),
+    };
+    let integration = match r.u32()? {
+        0 => Integration::MaterialPoint,
+        1 => Integration::Vc { order: r.u32()? },
+        other => return Err(corrupt(format!("unknown integration tag {other}"))),
+    };
+    let transfer = match r.u32()? {
+        0 => Transfer::PicFlip { flip: r.f64()? },
+        1 => Transfer::Apic,
+        other => return Err(corrupt(format!("unknown transfer tag {other}"))),
+    };
+    let scheme = match r.u32()? {
+        0 => Scheme::Usl,
+        1 => Scheme::Musl,
+        other => return Err(corrupt(format!("unknown scheme tag {other}"))),
+    };
+    let mut gravity = Vector::<D>::zeros();
+    for g in gravity.iter_mut() {
+        *g = r.f64()?;
+    }
+    let mut walls = Walls::<D>::default();
+    for face in walls.faces.iter_mut().flatten() {
+        let (tag, mu) = (r.u32()?, r.f64()?);
+        *face = match tag {
+            0 => Boundary::Free,
+            1 => Boundary::Fixed,
+            2 => Boundary::Slip,
+            3 => Boundary::Friction(mu),
+            other => return Err(corrupt(format!("unknown wall tag {other}"))),
+        };
+    }
+    let contact_on = r.u32()?;
+    let friction = r.f64()?;
+    // The setters validate what they get, so a damaged file cannot smuggle in bad options.
+    sim.set_shape(shape)?;
+    sim.set_integration(integration)?;
+    sim.set_transfer(transfer)?;
+    sim.set_scheme(scheme)?;
+    sim.set_gravity(gravity)?;
+    for a in 0..D {
+        for s in [crate::boundary::Side::Low, crate::boundary::Side::High] {
+            sim.set_boundary(a, s, walls.faces[a][s as usize])?;
+        }
+    }
+    sim.options.contact = (contact_on == 1).then_some(Contact { friction });
+    Ok(())
+}
+
+fn write_particles<const D: usize>(w: &mut Writer, ps: &Particles<D>) {
+    w.vectors(&ps.position);
+    w.vectors(&ps.reference_position);
+    w.vectors(&ps.velocity);
+    w.matrices(&ps.deformation_gradient);
+    w.scalars(&ps.reference_volume);
+    w.scalars(&ps.mass);
+    w.matrices(&ps.stress);
+    w.scalars(&ps.pressure);
+    w.len(ps.material.len());
+    ps.material.iter().for_each(|&m| w.u32(m));
+    w.matrices(&ps.affine);
+    w.len(ps.plastic.len());
+    for s in &ps.plastic {
+        w.f64s(s.elastic_deformation.iter());
+        w.f64s(&[s.plastic_strain, s.damage, s.heating]);
+    }
+}
+
+fn read_particles<const D: usize>(r: &mut Reader) -> Result<Particles<D>> {
+    let mut ps = Particles::<D> {
+        position: r.vectors()?,
+        reference_position: r.vectors()?,
+        velocity: r.vectors()?,
+        deformation_gradient: r.matrices()?,
+        reference_volume: r.scalars()?,
+        mass: r.scalars()?,
+        stress: r.matrices()?,
+        pressure: r.scalars()?,
+        ..Default::default()
+    };
+    let n = r.len(4)?;
+    ps.material = (0..n).map(|_| r.u32()).collect::<Result<_>>()?;
+    ps.affine = r.matrices()?;
+    let n = r.len(8 * 12)?;
+    ps.plastic = (0..n)
+        .map(|_| {
+            let mut fe = Matrix3::zeros();
+            for c in fe.iter_mut() {
+                *c = r.f64()?;
+            }
+            Ok(PlasticState {
+                elastic_deformation: fe,
+                plastic_strain: r.f64()?,
+                damage: r.f64()?,
+                heating: r.f64()?,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let len = ps.position.len();
+    let same = [
+        ps.reference_position.len(),
+        ps.velocity.len(),
+        ps.deformation_gradient.len(),
+        ps.reference_volume.len(),
+        ps.mass.len(),
+        ps.stress.len(),
+        ps.pressure.len(),
+        ps.material.len(),
+    ]
+    .iter()
+    .all(|&k| k == len);
+    let optional = |k: usize| k == 0 || k == len;
+    if !same || !optional(ps.affine.len()) || !optional(ps.plastic.len()) {
+        return Err(corrupt("the particle arrays differ in length"));
+    }
+    Ok(ps)
+}
+
+impl<const D: usize> Sim<D> {
+    /// The checkpoint of this simulation as bytes (see the module documentation).
+    pub fn checkpoint_bytes(&self) -> Vec<u8> {
+        let mut w = Writer::default();
+        w.f64s(self.grid.origin.iter());
+        self.grid.cells.iter().for_each(|&c| w.u64(c as u64));
+        w.f64(self.grid.cell_size);
+        write_options(&mut w, self);
+        w.len(self.materials.len());
+        self.materials
+            .iter()
+            .for_each(|m| write_material(&mut w, m));
+        write_particles(&mut w, &self.particles);
+        let b = &self.boundary;
+        w.vectors(&b.position);
+        w.vectors(&b.reference_area_normal);
+        w.vectors(&b.area_normal);
+        w.matrices(&b.deformation_gradient);
+        w.vectors(&b.traction);
+        w.f64(self.time);
+        w.u64(self.steps);
+        let payload = w.0;
+        let mut out = Vec::with_capacity(payload.len() + 28);
+        out.extend_from_slice(MAGIC);
+        out.extend_from_slice(&CHECKPOINT_VERSION.to_le_bytes());
+        out.extend_from_slice(&(D as u32).to_le_bytes());
+        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        out.extend_from_slice(&payload);
+        out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        out
+    }
+
+    /// Saves the checkpoint to `path`, atomically (temporary file, then rename).
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
+        super::write_atomically(path.as_ref(), &self.checkpoint_bytes())
+    }
+
+    /// Restores a simulation from checkpoint bytes. The body-force callback is not part of a
+    /// checkpoint: set it again.
+    pub fn from_checkpoint_bytes(bytes: &[u8]) -> Result<Self> {
+        let dim = checkpoint_dimension(bytes)?;
+        if dim != D {
+            return Err(Error::invalid(format!(
+                "the checkpoint is of a {dim}D simulation, not {D}D"
+            )));
+        }
+        let payload = &bytes[24..bytes.len() - 4];
+        let mut r = Reader(payload);
+        let mut origin = Vector::<D>::zeros();
+        for c in origin.iter_mut() {
+            *c = r.f64()?;
+        }
+        let mut cells = [0usize; D];
+        for c in cells.iter_mut() {
+            *c = usize::try_from(r.u64()?).map_err(|_| corrupt("cell count too large"))?;
+        }
+        let cell_size = r.f64()?;
+        let mut sim = Sim::<D>::new(origin, cells, cell_size)?;
+        read_options(&mut r, &mut sim)?;
+        let n = r.len(4)?;
+        sim.materials = (0..n)
+            .map(|_| read_material(&mut r))
+            .collect::<Result<_>>()?;
+        let ps = read_particles::<D>(&mut r)?;
+        if let Some(p) = ps
+            .material
+            .iter()
+            .position(|&m| m as usize >= sim.materials.len())
+        {
+            return Err(corrupt(format!(
+                "particle {p} refers to a missing material"
+            )));
+        }
+        if let Some(p) = ps.position.iter().position(|x| !sim.grid.contains(x)) {
+            return Err(corrupt(format!("particle {p} lies outside the grid")));
+        }
+        sim.particles = ps;
+        sim.boundary = BoundaryPoints {
+            position: r.vectors()?,
+            reference_area_normal: r.vectors()?,
+            area_normal: r.vectors()?,
+            deformation_gradient: r.matrices()?,
+            traction: r.vectors()?,
+        };
+        let b = &sim.boundary;
+        let nb = b.position.len();
+        if [
+            b.reference_area_normal.len(),
+            b.area_normal.len(),
+            b.deformation_gradient.len(),
+        ]
+        .iter()
+        .any(|&k| k != nb)
+            || !(b.traction.is_empty() || b.traction.len() == nb)
+        {
+            return Err(corrupt("the boundary-point arrays differ in length"));
+        }
+        sim.time = r.f64()?;
+        sim.steps = r.u64()?;
+        if !r.0.is_empty() {
+            return Err(corrupt("the checkpoint has trailing data"));
+        }
+        Ok(sim)
+    }
+
+    /// Loads a simulation saved with [`Sim::save`].
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        Self::from_checkpoint_bytes(&std::fs::read(path)?)
+    }
+}
+
+/// Checks the frame (magic, version, length, checksum) and returns the dimension.
+pub fn checkpoint_dimension(bytes: &[u8]) -> Result<usize> {
+    if bytes.len() < 28 || &bytes[..8] != MAGIC {
+        return Err(corrupt(
+            "not an rkmpm checkpoint (wrong magic or too short)",
+        ));
+    }
+    let word = |k: usize| u32::from_le_bytes(bytes[k..k + 4].try_into().expect("4 bytes"));
+    let version = word(8);
+    if version != CHECKPOINT_VERSION {
+        return Err(Error::new(
+            ErrorKind::Unsupported,
+            format!("checkpoint format version {version}; this build reads {CHECKPOINT_VERSION}"),
+        ));
+    }
+    let dim = word(12) as usize;
+    let len = u64::from_le_bytes(bytes[16..24].try_into().expect("8 bytes"));
+    if len != (bytes.len() - 28) as u64 {
+        return Err(corrupt(format!(
+            "the checkpoint is truncated or padded: {} payload bytes, header says {len}",
+            bytes.len() - 28
+        )));
+    }
+    let payload = &bytes[24..bytes.len() - 4];
+    let stored = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
+    if crc32fast::hash(payload) != stored {
+        return Err(corrupt("the checkpoint fails its checksum (damaged file)"));
+    }
+    if dim != 2 && dim != 3 {
+        return Err(corrupt(format!("dimension {dim} in the checkpoint")));
+    }
+    Ok(dim)
+}
