@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Every test of rkmpm: the Rust unit, integration and doc tests (the header check among them),
-# then the C and Fortran drivers built by CMake and run under CTest.
+# then the C and Fortran drivers built by CMake and run under CTest, then the same drivers again
+# under AddressSanitizer/LeakSanitizer/UndefinedBehaviorSanitizer (-DRKMPM_SANITIZE=ON).
 # Installs gfortran and cmake with apt-get when they are missing (as root; otherwise says how).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -29,3 +30,11 @@ build=build/examples
 cmake -S examples -B "$build" -DCMAKE_BUILD_TYPE=Release -DRKMPM_CARGO_TARGET_DIR="$PWD/target" >/dev/null
 cmake --build "$build" -j 2
 ctest --test-dir "$build" --output-on-failure
+
+echo "== The same drivers under AddressSanitizer, LeakSanitizer and UndefinedBehaviorSanitizer"
+asan=build/examples-sanitized
+cmake -S examples -B "$asan" -DCMAKE_BUILD_TYPE=Release -DRKMPM_CARGO_TARGET_DIR="$PWD/target" \
+  -DRKMPM_SANITIZE=ON >/dev/null
+cmake --build "$asan" -j 2
+ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1 \
+  ctest --test-dir "$asan" --output-on-failure
