@@ -99,6 +99,11 @@ typedef enum RkmpmStatus {
    * A checkpoint file is truncated, damaged (checksum) or not a checkpoint.
    */
   RKMPM_ERR_CORRUPT_FILE = 14,
+  /**
+   * Storage could not be allocated (for example a grid too large for the memory); the
+   * simulation is unchanged.
+   */
+  RKMPM_ERR_OUT_OF_MEMORY = 15,
 } RkmpmStatus;
 
 /**
@@ -331,7 +336,7 @@ typedef uint32_t RkmpmField;
  */
 #define RKMPM_FIELD_DAMAGE 10
 
-#define RkmpmStatus_ALL { RKMPM_OK, RKMPM_ERR_NULL_POINTER, RKMPM_ERR_INVALID_ARGUMENT, RKMPM_ERR_BUFFER_TOO_SMALL, RKMPM_ERR_INVALID_STATE, RKMPM_ERR_UNKNOWN_MATERIAL, RKMPM_ERR_OUTSIDE_GRID, RKMPM_ERR_UNSTABLE_TIME_STEP, RKMPM_ERR_NON_FINITE, RKMPM_ERR_INVERTED_PARTICLE, RKMPM_ERR_CALLBACK, RKMPM_ERR_IO, RKMPM_ERR_UNSUPPORTED, RKMPM_ERR_PANIC, RKMPM_ERR_CORRUPT_FILE, }
+#define RkmpmStatus_ALL { RKMPM_OK, RKMPM_ERR_NULL_POINTER, RKMPM_ERR_INVALID_ARGUMENT, RKMPM_ERR_BUFFER_TOO_SMALL, RKMPM_ERR_INVALID_STATE, RKMPM_ERR_UNKNOWN_MATERIAL, RKMPM_ERR_OUTSIDE_GRID, RKMPM_ERR_UNSTABLE_TIME_STEP, RKMPM_ERR_NON_FINITE, RKMPM_ERR_INVERTED_PARTICLE, RKMPM_ERR_CALLBACK, RKMPM_ERR_IO, RKMPM_ERR_UNSUPPORTED, RKMPM_ERR_PANIC, RKMPM_ERR_CORRUPT_FILE, RKMPM_ERR_OUT_OF_MEMORY, }
 
 
 
@@ -633,6 +638,24 @@ enum RkmpmStatus rkmpm_sim_stable_dt(const struct RkmpmSim *sim, double cfl, dou
  * `sim` must be a live handle.
  */
 enum RkmpmStatus rkmpm_sim_step(struct RkmpmSim *sim, double dt);
+
+/**
+ * Advances by `duration` (> 0) with adaptive steps: before every step the stable step is
+ * recomputed from the current state and `cfl` (in `(0, 1]`) times it is taken, shortened at
+ * the end so that the run ends at `time + duration` exactly. Writes the number of steps taken
+ * to `*out_steps` when `out_steps` is not NULL (also on failure).
+ *
+ * Each step is all or nothing: on failure the simulation keeps the state after the last good
+ * step (earlier steps of this call stay taken) and the message says how many steps were taken
+ * and where it stopped. Invalid `duration` or `cfl` change nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_steps` NULL or valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_advance(struct RkmpmSim *sim,
+                                   double duration,
+                                   double cfl,
+                                   uint64_t *out_steps);
 
 /**
  * Writes the simulated time to `*out_time`.

@@ -28,6 +28,8 @@ pub enum ErrorKind {
     Unsupported,
     /// A checkpoint file is truncated, damaged or not a checkpoint.
     CorruptFile,
+    /// Storage (for example the grid's nodes) could not be allocated.
+    OutOfMemory,
 }
 
 /// An error with its kind and a human-readable message.

@@ -9,7 +9,7 @@
 //! Node storage is dense, but a step only visits the nodes that particles touched (the
 //! `active` list) and resets only those.
 
-use crate::error::{check_finite, check_positive, Error, Result};
+use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::Vector;
 
 /// Geometry of the background grid. Nodes have integer indices `-ghost ..= cells + ghost` per axis.
@@ -156,47 +156,58 @@ pub struct GridNodes<const D: usize> {
 }
 
 impl<const D: usize> GridNodes<D> {
-    /// Sizes the storage for `grid` (all zero, nothing active).
-    pub fn resize(&mut self, grid: &Grid<D>) {
+    /// Sizes the storage for `grid`, with the lumping shift of signed shape functions
+    /// (`lumping`) and the mass gradient of contact (`mass_gradient`) when asked for. Does nothing
+    /// when the storage already fits; otherwise all fields start at zero with nothing active.
+    /// All or nothing: when the storage cannot be allocated (`OutOfMemory`), the nodes are left
+    /// as they were.
+    pub fn ensure(&mut self, grid: &Grid<D>, lumping: bool, mass_gradient: bool) -> Result<()> {
         let n = grid.node_count();
-        self.mass = vec![0.0; n];
-        self.momentum = vec![Vector::zeros(); n];
-        self.force = vec![Vector::zeros(); n];
-        self.velocity_old = vec![Vector::zeros(); n];
-        self.velocity = vec![Vector::zeros(); n];
-        self.touched = vec![false; n];
-        self.slot = vec![0; n];
-        self.active.clear();
-        if let Some(l) = self.lumping.as_mut() {
-            *l = LumpingShift::new(n);
+        if self.mass.len() == n
+            && self.lumping.is_some() == lumping
+            && (self.mass_gradient.len() == n) == mass_gradient
+        {
+            return Ok(());
         }
-        if !self.mass_gradient.is_empty() {
-            self.mass_gradient = vec![Vector::zeros(); n];
-        }
-    }
-
-    /// Adds (or removes) the storage for the mass gradient (contact).
-    pub fn set_mass_gradient(&mut self, on: bool) {
-        match (on, self.mass_gradient.is_empty()) {
-            (true, true) => self.mass_gradient = vec![Vector::zeros(); self.mass.len()],
-            (false, false) => self.mass_gradient = Vec::new(),
-            _ => {}
-        }
+        let fail = |e: std::collections::TryReserveError| {
+            let per_node = std::mem::size_of::<f64>()
+                * (1 + 4 * D + usize::from(mass_gradient) * D + usize::from(lumping) * (2 + 3 * D))
+                + 5;
+            Error::new(
+                ErrorKind::OutOfMemory,
+                format!(
+                    "the grid's node storage ({n} nodes, about {:.1} GiB) cannot be allocated \
+                     ({e}); use fewer or larger cells",
+                    (n as f64 * per_node as f64) / (1u64 << 30) as f64
+                ),
+            )
+        };
+        let nodes = GridNodes {
+            mass: filled(n, 0.0).map_err(fail)?,
+            momentum: filled(n, Vector::zeros()).map_err(fail)?,
+            force: filled(n, Vector::zeros()).map_err(fail)?,
+            velocity_old: filled(n, Vector::zeros()).map_err(fail)?,
+            velocity: filled(n, Vector::zeros()).map_err(fail)?,
+            lumping: match lumping {
+                true => Some(LumpingShift::new(n).map_err(fail)?),
+                false => None,
+            },
+            mass_gradient: match mass_gradient {
+                true => filled(n, Vector::zeros()).map_err(fail)?,
+                false => Vec::new(),
+            },
+            touched: filled(n, false).map_err(fail)?,
+            slot: filled(n, 0).map_err(fail)?,
+            active: Vec::new(),
+        };
+        *self = nodes;
+        Ok(())
     }
 
     /// Whether node `n` was written this step.
     #[inline]
     pub fn is_touched(&self, n: usize) -> bool {
         self.touched.get(n).copied().unwrap_or(false)
-    }
-
-    /// Adds (or removes) the storage for the lumping shift of signed shape functions.
-    pub fn set_lumping(&mut self, on: bool) {
-        match (on, self.lumping.is_some()) {
-            (true, false) => self.lumping = Some(LumpingShift::new(self.mass.len())),
-            (false, true) => self.lumping = None,
-            _ => {}
-        }
     }
 
     /// Marks node `n` as written this step and returns its position in `active`.
@@ -265,14 +276,14 @@ pub struct LumpingShift<const D: usize> {
 }
 
 impl<const D: usize> LumpingShift<D> {
-    fn new(n: usize) -> Self {
-        LumpingShift {
-            mass: vec![0.0; n],
-            momentum: vec![Vector::zeros(); n],
-            body_force: vec![Vector::zeros(); n],
-            body_force_shape: vec![Vector::zeros(); n],
-            blend: vec![1.0; n],
-        }
+    fn new(n: usize) -> std::result::Result<Self, std::collections::TryReserveError> {
+        Ok(LumpingShift {
+            mass: filled(n, 0.0)?,
+            momentum: filled(n, Vector::zeros())?,
+            body_force: filled(n, Vector::zeros())?,
+            body_force_shape: filled(n, Vector::zeros())?,
+            blend: filled(n, 1.0)?,
+        })
     }
 
     /// Weight `θ ∈ [0, 1]` of the shape-function lumping at a node with lumped masses
@@ -287,6 +298,17 @@ impl<const D: usize> LumpingShift<D> {
         let s = ((mass_shape / mass_lumping - 0.25) / 0.5).clamp(0.0, 1.0);
         s * s * (3.0 - 2.0 * s)
     }
+}
+
+/// `n` copies of `value`, or the allocation error instead of an abort.
+fn filled<T: Clone>(
+    n: usize,
+    value: T,
+) -> std::result::Result<Vec<T>, std::collections::TryReserveError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n)?;
+    v.resize(n, value);
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -321,6 +321,15 @@ impl<const D: usize> Sim<D> {
                 ));
             }
             check_positive(&format!("volume of particle {p}"), volumes[p])?;
+            let domain: f64 = (0..D)
+                .map(|a| self.grid.cells[a] as f64 * self.grid.cell_size)
+                .product();
+            if volumes[p] > domain {
+                return Err(Error::invalid(format!(
+                    "volume of particle {p} ({:e}) exceeds the volume of the whole domain ({domain:e})",
+                    volumes[p]
+                )));
+            }
             if let Some(v) = velocities {
                 if v[p].iter().any(|c| !c.is_finite()) {
                     return Err(Error::invalid(format!(
@@ -330,6 +339,12 @@ impl<const D: usize> Sim<D> {
             }
         }
         let rho = mat.density();
+        if let Some(p) = (0..n).find(|&p| !(rho * volumes[p]).is_finite()) {
+            return Err(Error::invalid(format!(
+                "the mass of particle {p} (density {rho:e} × volume {:e}) is not finite",
+                volumes[p]
+            )));
+        }
         let ps = &mut self.particles;
         let apic = matches!(self.options.transfer, Transfer::Apic);
         ps.position.extend_from_slice(positions);
@@ -381,6 +396,12 @@ impl<const D: usize> Sim<D> {
                 self.materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
             })
             .fold(0.0, f64::max);
+        if !(speed > 0.0 && speed.is_finite()) {
+            return Err(Error::state(format!(
+                "the largest signal speed max(c + |v|) over the particles is {speed:e}: no \
+                 stable time step follows from it (only resting rigid bodies?)"
+            )));
+        }
         Ok(self.grid.cell_size / speed)
     }
 

@@ -57,6 +57,7 @@ module rkmpm
    integer(c_int), parameter, public :: RKMPM_ERR_UNSUPPORTED = 12
    integer(c_int), parameter, public :: RKMPM_ERR_PANIC = 13
    integer(c_int), parameter, public :: RKMPM_ERR_CORRUPT_FILE = 14
+   integer(c_int), parameter, public :: RKMPM_ERR_OUT_OF_MEMORY = 15
 
    ! RkmpmShape (uint32_t)
    integer(c_int32_t), parameter, public :: RKMPM_SHAPE_LINEAR = 0
@@ -165,6 +166,7 @@ module rkmpm
       procedure :: boundary_point_count => sim_boundary_point_count
       procedure :: stable_dt => sim_stable_dt
       procedure :: step => sim_step
+      procedure :: advance => sim_advance
       procedure :: time => sim_time
       procedure :: step_count => sim_step_count
       procedure :: particle_count => sim_particle_count
@@ -419,6 +421,16 @@ module rkmpm
          type(c_ptr), value :: sim
          real(c_double), value :: dt
       end function rkmpm_sim_step
+
+      ! enum RkmpmStatus rkmpm_sim_advance(struct RkmpmSim *sim, double duration, double cfl,
+      !                                    uint64_t *out_steps);
+      integer(c_int) function rkmpm_sim_advance(sim, duration, cfl, out_steps) &
+            bind(C, name="rkmpm_sim_advance")
+         import :: c_int, c_ptr, c_double, c_int64_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: duration, cfl
+         integer(c_int64_t), intent(out) :: out_steps
+      end function rkmpm_sim_advance
 
       ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
       integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
@@ -1024,6 +1036,24 @@ contains
       call report(rkmpm_sim_step(self%h, dt), 'step', stat, text)
       if (present(errmsg)) errmsg = text
    end subroutine sim_step
+
+   !> Advances by `duration` with adaptive steps of `cfl` (in (0, 1]) times the stable step,
+   !> recomputed before every step, ending exactly at time + duration. `steps` (optional) gets
+   !> the number of steps taken, also on failure; on failure the simulation keeps the state after
+   !> the last good step.
+   subroutine sim_advance(self, duration, cfl, steps, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: duration, cfl
+      integer(c_int64_t), intent(out), optional :: steps
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int64_t) :: n
+      n = 0
+      call report(rkmpm_sim_advance(self%h, duration, cfl, n), 'advance', stat, text)
+      if (present(steps)) steps = n
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_advance
 
    !> The simulated time.
    real(c_double) function sim_time(self, stat, errmsg)

@@ -14,6 +14,7 @@
  */
 #include "rkmpm.h"
 #include "rkmpm_check.h"
+#include "snapshot.h"
 
 #include <float.h>
 #include <math.h>
@@ -62,55 +63,17 @@ static void expect_status(RkmpmStatus got, RkmpmStatus want, const char *functio
 
 #define EXPECT_STATUS(call, want, function) expect_status((call), (want), (function), #call, __LINE__)
 
-/* Everything a caller can observe of a simulation. */
-typedef struct {
-  size_t count;
-  size_t boundary_points;
-  double time;
-  uint64_t steps;
-  size_t len[9];
-  double *fields[9];
-} Snapshot;
+/* Everything a caller can observe of a simulation (snapshot.h): every particle field, the
+   counts, the time and the step count. */
+static Snapshot snapshot(const RkmpmSim *sim) { return snapshot_take(sim); }
 
-static Snapshot snapshot(const RkmpmSim *sim) {
-  Snapshot s;
-  memset(&s, 0, sizeof s);
-  s.count = rkmpm_sim_particle_count(sim);
-  RKMPM_CHECK(rkmpm_sim_time(sim, &s.time));
-  RKMPM_CHECK(rkmpm_sim_step_count(sim, &s.steps));
-  RKMPM_CHECK(rkmpm_sim_boundary_point_count(sim, &s.boundary_points));
-  for (RkmpmField f = RKMPM_FIELD_POSITION; f <= RKMPM_FIELD_DEFORMATION_GRADIENT; ++f) {
-    RKMPM_CHECK(rkmpm_sim_field_len(sim, f, &s.len[f]));
-    s.fields[f] = malloc((s.len[f] + 1) * sizeof(double));
-    if (s.fields[f] == NULL) {
-      fprintf(stderr, "out of memory\n");
-      exit(EXIT_FAILURE);
-    }
-    RKMPM_CHECK(rkmpm_sim_get_particles(sim, f, s.fields[f], s.len[f]));
-  }
-  return s;
-}
-
-static void release(Snapshot *s) {
-  for (int f = 0; f < 9; ++f) {
-    free(s->fields[f]);
-    s->fields[f] = NULL;
-  }
-}
+static void release(Snapshot *s) { snapshot_release(s); }
 
 static void expect_same(const Snapshot *a, const Snapshot *b, const char *call, int line) {
   ++checks;
-  int same = a->count == b->count && a->boundary_points == b->boundary_points &&
-             memcmp(&a->time, &b->time, sizeof a->time) == 0 && a->steps == b->steps;
-  for (int f = 0; same && f < 9; ++f) {
-    same = a->len[f] == b->len[f] &&
-           memcmp(a->fields[f], b->fields[f], a->len[f] * sizeof(double)) == 0;
-  }
-  if (!same) {
-    fprintf(stderr, "FAIL (line %d): %s changed the simulation (particles %zu -> %zu, boundary "
-                    "points %zu -> %zu, time %g -> %g, steps %llu -> %llu, or a particle field)\n",
-            line, call, a->count, b->count, a->boundary_points, b->boundary_points, a->time,
-            b->time, (unsigned long long)a->steps, (unsigned long long)b->steps);
+  char what[256];
+  if (!snapshot_compare(a, b, what, sizeof what)) {
+    fprintf(stderr, "FAIL (line %d): %s changed the simulation (%s)\n", line, call, what);
     ++failures;
   }
 }

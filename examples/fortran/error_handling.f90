@@ -81,7 +81,7 @@ program error_handling
    real(c_double), allocatable :: wrong(:, :)
    integer :: i, j, p
    integer(c_size_t) :: n0
-   integer(c_int64_t) :: steps0
+   integer(c_int64_t) :: steps0, taken
    type(force_data), target :: force
    character(len=64) :: names(0:13)
    real(c_double) :: bx(2, 2), bn(2, 2)
@@ -319,6 +319,18 @@ program error_handling
    call expect(st, RKMPM_ERR_INVALID_STATE, msg, 'integration after a step')
    call sim%set_gravity([0.0_c_double, -9.81_c_double], stat=st, errmsg=msg)
    call expect(st, RKMPM_OK, msg, 'gravity after a step')
+
+   ! ---- adaptive steps ----
+   call sim%advance(10*dt, 1.5_c_double, taken, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'advance with cfl 1.5')
+   call expect_true(taken == 0, 'an invalid cfl takes no step')
+   call sim%advance(-dt, 0.4_c_double, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'advance by a negative duration')
+   t0 = sim%time()
+   call sim%advance(3.5_c_double*dt, 0.5_c_double, taken, stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'advance by 3.5 dt at cfl 0.5')
+   call expect_true(taken >= 2, 'advance took at least 2 steps (stable steps of about 1.25 dt)')
+   call expect_true(sim%time() == t0 + 3.5_c_double*dt, 'advance ends exactly at the requested time')
 
    ! ---- files ----
    call sim%write_vtk('rkmpm-no-such-directory/particles.vtu', stat=st, errmsg=msg)

@@ -318,7 +318,7 @@ pub unsafe extern "C" fn rkmpm_sim_load(
 /// `sim` must be NULL or a live handle from `rkmpm_sim_new`, freed once.
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_free(sim: *mut RkmpmSim) {
-    if !sim.is_null() {
+    if !sim.is_null() && sim.is_aligned() {
         let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| drop(Box::from_raw(sim))));
     }
 }
@@ -898,6 +898,40 @@ pub unsafe extern "C" fn rkmpm_sim_step(sim: *mut RkmpmSim, dt: f64) -> RkmpmSta
     })
 }
 
+/// Advances by `duration` (> 0) with adaptive steps: before every step the stable step is
+/// recomputed from the current state and `cfl` (in `(0, 1]`) times it is taken, shortened at
+/// the end so that the run ends at `time + duration` exactly. Writes the number of steps taken
+/// to `*out_steps` when `out_steps` is not NULL (also on failure).
+///
+/// Each step is all or nothing: on failure the simulation keeps the state after the last good
+/// step (earlier steps of this call stay taken) and the message says how many steps were taken
+/// and where it stopped. Invalid `duration` or `cfl` change nothing.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_steps` NULL or valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_advance(
+    sim: *mut RkmpmSim,
+    duration: f64,
+    cfl: f64,
+    out_steps: *mut u64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_advance", || {
+        let s = sim_mut(sim)?;
+        if !out_steps.is_null() {
+            check_ptr("out_steps", out_steps)?;
+        }
+        let before = with_sim!(&s.sim, m => m.steps());
+        let result = with_sim!(&mut s.sim, m => m.advance(duration, cfl));
+        if !out_steps.is_null() {
+            // SAFETY: checked non-NULL and aligned; the caller promises it is writable.
+            out_steps.write(with_sim!(&s.sim, m => m.steps()) - before);
+        }
+        result?;
+        Ok(())
+    })
+}
+
 /// Writes the simulated time to `*out_time`.
 ///
 /// # Safety
@@ -931,7 +965,7 @@ pub unsafe extern "C" fn rkmpm_sim_step_count(
 /// `sim` must be NULL or a live handle.
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_particle_count(sim: *const RkmpmSim) -> usize {
-    if sim.is_null() {
+    if sim.is_null() || !sim.is_aligned() {
         return 0;
     }
     with_sim!(&(*sim).sim, m => m.particles().len())
@@ -1025,6 +1059,12 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk_frame(
     gate("rkmpm_sim_write_vtk_frame", || {
         let s = sim_mut(sim)?;
         let prefix = c_path("prefix", prefix)?;
+        if prefix.is_empty() || prefix.ends_with('/') {
+            return Err(Failure::new(
+                RKMPM_ERR_INVALID_ARGUMENT,
+                format!("prefix \"{prefix}\" names no file (frames are <prefix>_00000.vtu)"),
+            ));
+        }
         let k = match s
             .series
             .iter()

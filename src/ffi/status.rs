@@ -37,10 +37,13 @@ pub enum RkmpmStatus {
     RKMPM_ERR_PANIC = 13,
     /// A checkpoint file is truncated, damaged (checksum) or not a checkpoint.
     RKMPM_ERR_CORRUPT_FILE = 14,
+    /// Storage could not be allocated (for example a grid too large for the memory); the
+    /// simulation is unchanged.
+    RKMPM_ERR_OUT_OF_MEMORY = 15,
 }
 
 impl RkmpmStatus {
-    pub const ALL: [RkmpmStatus; 15] = [
+    pub const ALL: [RkmpmStatus; 16] = [
         RkmpmStatus::RKMPM_OK,
         RkmpmStatus::RKMPM_ERR_NULL_POINTER,
         RkmpmStatus::RKMPM_ERR_INVALID_ARGUMENT,
@@ -56,6 +59,7 @@ impl RkmpmStatus {
         RkmpmStatus::RKMPM_ERR_UNSUPPORTED,
         RkmpmStatus::RKMPM_ERR_PANIC,
         RkmpmStatus::RKMPM_ERR_CORRUPT_FILE,
+        RkmpmStatus::RKMPM_ERR_OUT_OF_MEMORY,
     ];
 
     /// A NUL-terminated static description.
@@ -76,6 +80,7 @@ impl RkmpmStatus {
             RkmpmStatus::RKMPM_ERR_UNSUPPORTED => "not supported\0",
             RkmpmStatus::RKMPM_ERR_PANIC => "internal error (panic)\0",
             RkmpmStatus::RKMPM_ERR_CORRUPT_FILE => "corrupt checkpoint file\0",
+            RkmpmStatus::RKMPM_ERR_OUT_OF_MEMORY => "out of memory\0",
         }
     }
 }
@@ -94,6 +99,7 @@ impl From<ErrorKind> for RkmpmStatus {
             ErrorKind::Io => RkmpmStatus::RKMPM_ERR_IO,
             ErrorKind::Unsupported => RkmpmStatus::RKMPM_ERR_UNSUPPORTED,
             ErrorKind::CorruptFile => RkmpmStatus::RKMPM_ERR_CORRUPT_FILE,
+            ErrorKind::OutOfMemory => RkmpmStatus::RKMPM_ERR_OUT_OF_MEMORY,
         }
     }
 }

@@ -18,8 +18,8 @@ use crate::contact::Contact;
 use crate::error::{Error, ErrorKind, Result};
 use crate::integration::BoundaryPoints;
 use crate::material::{
-    DruckerPrager, ElasticConstants, JohnsonCook, JohnsonCookParameters, LinearElastic, Material,
-    MieGruneisen, NeoHookean, PlasticState, Rigid,
+    Constitutive, DruckerPrager, ElasticConstants, JohnsonCook, JohnsonCookParameters,
+    LinearElastic, Material, MieGruneisen, NeoHookean, PlasticState, Rigid,
 };
 use crate::particles::Particles;
 use crate::shape::Shape;
@@ -476,6 +476,18 @@ impl<const D: usize> Sim<D> {
             )));
         }
         let payload = &bytes[24..bytes.len() - 4];
+        // The frame is intact (checksum), so a value the engine refuses means a damaged or forged
+        // file: every refusal below is `CorruptFile`.
+        Self::decode(payload).map_err(|e| match e.kind {
+            ErrorKind::CorruptFile => e,
+            _ => corrupt(format!(
+                "the checkpoint holds a value the engine refuses: {}",
+                e.message
+            )),
+        })
+    }
+
+    fn decode(payload: &[u8]) -> Result<Self> {
         let mut r = Reader(payload);
         let mut origin = Vector::<D>::zeros();
         for c in origin.iter_mut() {
@@ -505,6 +517,25 @@ impl<const D: usize> Sim<D> {
         if let Some(p) = ps.position.iter().position(|x| !sim.grid.contains(x)) {
             return Err(corrupt(format!("particle {p} lies outside the grid")));
         }
+        let n = ps.len();
+        let apic = matches!(sim.options.transfer, crate::sim::Transfer::Apic);
+        if ps.affine.len() != if apic { n } else { 0 } {
+            return Err(corrupt(format!(
+                "{} APIC matrices for {n} particles under {:?}",
+                ps.affine.len(),
+                sim.options.transfer
+            )));
+        }
+        let history = ps
+            .material
+            .iter()
+            .any(|&m| !sim.materials[m as usize].is_elastic());
+        if history && ps.plastic.len() != n {
+            return Err(corrupt(format!(
+                "{} history records for {n} particles of a plastic material",
+                ps.plastic.len()
+            )));
+        }
         sim.particles = ps;
         sim.boundary = BoundaryPoints {
             position: r.vectors()?,
@@ -525,6 +556,14 @@ impl<const D: usize> Sim<D> {
             || !(b.traction.is_empty() || b.traction.len() == nb)
         {
             return Err(corrupt("the boundary-point arrays differ in length"));
+        }
+        if let Some(b) = sim
+            .boundary
+            .position
+            .iter()
+            .position(|x| !sim.grid.contains(x))
+        {
+            return Err(corrupt(format!("boundary point {b} lies outside the grid")));
         }
         sim.time = r.f64()?;
         sim.steps = r.u64()?;

@@ -26,6 +26,14 @@ impl ElasticConstants {
         }
         let mu = young / (2.0 * (1.0 + poisson));
         let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+        let wave_speed = ((lambda + 2.0 * mu) / density).sqrt();
+        if !(lambda.is_finite() && mu.is_finite() && wave_speed.is_finite() && wave_speed > 0.0) {
+            return Err(Error::invalid(format!(
+                "density {density:e}, young {young:e} and poisson {poisson} give elastic \
+                 constants or a wave speed that are not finite and positive (lambda = {lambda:e}, \
+                 mu = {mu:e}, c = {wave_speed:e})"
+            )));
+        }
         Ok(ElasticConstants {
             density,
             young,

@@ -14,6 +14,7 @@
 mod grid_to_particle;
 mod grid_update;
 mod particle_to_grid;
+mod timestep;
 
 pub use grid_to_particle::{grid_to_particle, velocity_gradient, Fields, ParticleUpdate};
 pub use grid_update::grid_update;
@@ -75,11 +76,24 @@ impl<const D: usize> Sim<D> {
     /// the first such particle and the step.
     pub fn step(&mut self, dt: f64) -> Result<()> {
         check_positive("dt", dt)?;
+        let next = self.time + dt;
+        if !next.is_finite() || next == self.time {
+            return Err(Error::invalid(format!(
+                "dt = {dt:e} at t = {:e} gives a time that is {}",
+                self.time,
+                if next.is_finite() {
+                    "unchanged (below the resolution of the time)"
+                } else {
+                    "not finite"
+                }
+            )));
+        }
         if self.particles.is_empty() {
             self.time += dt;
             self.steps += 1;
             return Ok(());
         }
+        self.check_options()?;
         let critical = self.critical_dt()?;
         if dt > critical {
             return Err(Error::new(
@@ -91,7 +105,6 @@ impl<const D: usize> Sim<D> {
                 ),
             ));
         }
-        self.check_options()?;
         let generate = self.vc.is_some() && self.boundary.is_empty() && self.steps == 0;
         if generate {
             // VC needs the surface: take it from the particle lattice (documented).
@@ -99,9 +112,20 @@ impl<const D: usize> Sim<D> {
                 &self.particles.position,
                 &self.particles.reference_volume,
             );
+            if let Some(b) = x.iter().position(|x| !self.grid.contains(x)) {
+                return Err(Error::new(
+                    ErrorKind::OutsideGrid,
+                    format!(
+                        "VC boundary point {b} found from the particle lattice lies outside the \
+                         grid (a particle face at spacing V^(1/dim) crosses the domain's edge); \
+                         keep particles half a spacing inside or give boundary points with \
+                         rkmpm_sim_add_boundary_points"
+                    ),
+                ));
+            }
             self.boundary.add(&x, &na, None)?;
         }
-        let result = self.advance(dt);
+        let result = self.compute_step(dt);
         self.work.nodes.reset();
         for b in self.work.bodies.iter_mut() {
             b.reset();
@@ -174,15 +198,13 @@ impl<const D: usize> Sim<D> {
     }
 
     /// Runs the phases and returns the checked new particle state (in the workspace).
-    fn advance(&mut self, dt: f64) -> Result<Vec<ParticleUpdate<D>>> {
+    fn compute_step(&mut self, dt: f64) -> Result<Vec<ParticleUpdate<D>>> {
         let plan = self.transfer_plan();
         let grid = &self.grid;
         let ps = &self.particles;
         let work = &mut self.work;
-        work.nodes.set_lumping(self.shape.is_signed());
-        if work.nodes.mass.len() != grid.node_count() {
-            work.nodes.resize(grid);
-        }
+        let signed = self.shape.is_signed();
+        work.nodes.ensure(grid, signed, false)?;
         let contact = self.options.contact;
         let rigid: Vec<Option<Vector<D>>> =
             self.materials.iter().map(|m| m.rigid_velocity()).collect();
@@ -190,11 +212,7 @@ impl<const D: usize> Sim<D> {
             work.bodies
                 .resize_with(self.materials.len(), GridNodes::default);
             for b in work.bodies.iter_mut() {
-                b.set_lumping(self.shape.is_signed());
-                if b.mass.len() != grid.node_count() {
-                    b.resize(grid);
-                }
-                b.set_mass_gradient(true);
+                b.ensure(grid, signed, true)?;
             }
         }
 

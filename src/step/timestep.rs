@@ -1,0 +1,68 @@
+//! Adaptive time stepping: advance over a span of time with steps that stay a fixed fraction
+//! (the CFL number) of the critical step, recomputed before every step.
+
+use crate::error::{check_finite, Error, Result};
+use crate::sim::Sim;
+
+impl<const D: usize> Sim<D> {
+    /// Advances by `duration` (> 0) with steps of `cfl · h / max_p(c_p + |v_p|)`, the stable step
+    /// recomputed from the current state before each step, `cfl` in `(0, 1]`. The last steps are
+    /// shortened so that the run ends at `time + duration` exactly (the final span shorter than
+    /// two stable steps is split into two equal steps, so no sliver step is taken). Returns the
+    /// number of steps taken.
+    ///
+    /// Each step is all or nothing ([`Sim::step`]): when one fails, the simulation keeps the
+    /// state after the last good step, and the error message says how many steps were taken
+    /// and at which time it stopped.
+    pub fn advance(&mut self, duration: f64, cfl: f64) -> Result<u64> {
+        check_finite("duration", duration)?;
+        if duration <= 0.0 {
+            return Err(Error::invalid(format!(
+                "duration must be positive, got {duration:e}"
+            )));
+        }
+        let end = self.time + duration;
+        if end == self.time {
+            return Err(Error::invalid(format!(
+                "duration {duration:e} is below the resolution of the time {:e}",
+                self.time
+            )));
+        }
+        // Validate cfl (and that there are particles) before the first step.
+        self.stable_dt(cfl)?;
+        let start = self.time;
+        let mut taken = 0u64;
+        while self.time < end {
+            let stable = self.stable_dt(cfl)?;
+            let left = end - self.time;
+            let dt = if left <= stable {
+                left
+            } else if left < 2.0 * stable {
+                0.5 * left
+            } else {
+                stable
+            };
+            if self.time + dt == self.time {
+                return Err(Error::invalid(format!(
+                    "the step {dt:e} (cfl {cfl} of the stable step) is below the resolution of \
+                     the time {:e}: the run cannot advance ({taken} steps taken)",
+                    self.time
+                )));
+            }
+            if let Err(mut e) = self.step(dt) {
+                e.message = format!(
+                    "{} (adaptive run from t = {start:e}: {taken} steps taken, stopped at \
+                     t = {:e} of {end:e})",
+                    e.message, self.time
+                );
+                return Err(e);
+            }
+            taken += 1;
+            if left <= stable {
+                // The rounded sum of the steps may miss `end` by an ulp: land on it.
+                self.time = end;
+            }
+        }
+        Ok(taken)
+    }
+}
