@@ -30,6 +30,7 @@ pub mod integration;
 pub mod io;
 pub mod material;
 pub mod particles;
+pub mod scene;
 pub mod scenes;
 pub mod shape;
 pub mod sim;

@@ -1,63 +1,120 @@
-//! `rkmpm`: runs a built-in scene end to end, writes VTK frames, prints a summary.
-//!
-//! ```text
-//! rkmpm [disks|bar2d|bar3d] [--out DIR]
-//! ```
+//! `rkmpm`: the command-line runner. Runs a scene file (or a bundled scene) end to end with a
+//! progress bar, writes VTK frames for ParaView and prints a summary. `rkmpm --help` explains
+//! every option.
 
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::scenes::{colliding_disks, run_vibrating_bar, VibratingBar};
-use std::path::PathBuf;
+use rkmpm::scene::{Scene, SceneSim, BUNDLED};
+use rkmpm::scenes::{run_vibrating_bar, VibratingBar};
+use rkmpm::Sim;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-const HELP: &str = "\
-rkmpm: run a built-in MPM scene and write ParaView output
+#[derive(Parser)]
+#[command(
+    name = "rkmpm",
+    version,
+    about = "Run Material Point Method scenes (RK shape functions, VC integration) and write ParaView output",
+    long_about = "Run Material Point Method scenes and write ParaView output.\n\n\
+        Without a command, `rkmpm [SCENE] [OPTIONS]` is `rkmpm run [SCENE] [OPTIONS]`, and with \
+        no scene it runs the default one (two elastic disks collide). A scene is a TOML file (docs/SCENES.md lists every key) or the \
+        name of a bundled scene (`rkmpm list`).",
+    after_help = "Examples:\n  rkmpm                                  run the default scene into out/\n  \
+        rkmpm run scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80\n  \
+        rkmpm check my_scene.toml               read and build a scene without running it\n  \
+        rkmpm list                              the bundled scenes"
+)]
+#[command(args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    /// Without a command: the options of `run`.
+    #[command(flatten)]
+    run: RunArgs,
+}
 
-USAGE: rkmpm [SCENE] [--out DIR]
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene: build it, step it to its end time with adaptive steps, write VTK frames
+    /// (<out>/<output>_NNNNN.vtu and <out>/<output>.pvd) and print a summary.
+    Run(RunArgs),
+    /// Read and build a scene without stepping it; print what it holds.
+    Check {
+        /// A scene file (.toml) or the name of a bundled scene.
+        scene: String,
+    },
+    /// List the bundled scenes.
+    List,
+    /// Print a bundled scene's TOML, to start a scene file of your own.
+    Show {
+        /// The name of a bundled scene.
+        name: String,
+    },
+    /// Run the vibrating bar against its exact solution and print the errors.
+    Verify {
+        /// `bar2d` or `bar3d`.
+        #[arg(value_parser = ["bar2d", "bar3d"])]
+        problem: String,
+        /// Directory for the final VTK frame.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+    },
+}
 
-SCENES:
-  disks   two neo-Hookean disks collide (Sulsky et al. 1994), 2D  [default]
-  bar2d   axial vibrating bar against its exact solution, 2D
-  bar3d   the same bar in 3D
-
-OPTIONS:
-  --out DIR   directory for the VTK frames and the .pvd series (default: out)
-  -h, --help  this text
-";
+#[derive(clap::Args)]
+struct RunArgs {
+    /// A scene file (.toml) or the name of a bundled scene [default: disks].
+    scene: Option<String>,
+    /// Directory for the VTK frames and the .pvd series (created if missing).
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Overrides the scene's run.end_time (seconds of simulated time).
+    #[arg(long)]
+    end_time: Option<f64>,
+    /// Overrides the scene's run.frames (VTK frames over the run; 0 writes none).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
+    #[arg(long)]
+    cfl: Option<f64>,
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar, only the summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
 
 fn main() -> ExitCode {
-    let mut scene = "disks".to_string();
-    let mut out = PathBuf::from("out");
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "-h" | "--help" => {
-                print!("{HELP}");
-                return ExitCode::SUCCESS;
+    let cli = Cli::parse();
+    let result = match cli.command.unwrap_or(Command::Run(cli.run)) {
+        Command::Run(args) => run(args),
+        Command::Check { scene } => check(&scene),
+        Command::List => {
+            for (name, text) in BUNDLED {
+                let title = Scene::from_toml(text, name)
+                    .map(|s| s.title)
+                    .unwrap_or_default();
+                println!("{name:<12} {title}");
             }
-            "--out" => match args.next() {
-                Some(d) => out = PathBuf::from(d),
-                None => {
-                    eprintln!("--out needs a directory\n\n{HELP}");
-                    return ExitCode::from(2);
-                }
-            },
-            s if !s.starts_with('-') => scene = s.to_string(),
-            other => {
-                eprintln!("unknown option {other}\n\n{HELP}");
-                return ExitCode::from(2);
-            }
+            Ok(())
         }
-    }
-    if let Err(e) = std::fs::create_dir_all(&out) {
-        eprintln!("cannot create {}: {e}", out.display());
-        return ExitCode::FAILURE;
-    }
-    let result = match scene.as_str() {
-        "disks" => disks(&out),
-        "bar2d" => bar::<2>(&out),
-        "bar3d" => bar::<3>(&out),
-        other => Err(format!("unknown scene {other}\n\n{HELP}")),
+        Command::Show { name } => match BUNDLED.iter().find(|(n, _)| *n == name) {
+            Some((_, text)) => {
+                print!("{text}");
+                Ok(())
+            }
+            None => Err(format!("no bundled scene {name:?} (rkmpm list)")),
+        },
+        Command::Verify { problem, out } => std::fs::create_dir_all(&out)
+            .map_err(|e| format!("cannot create {}: {e}", out.display()))
+            .and_then(|_| match problem.as_str() {
+                "bar2d" => bar::<2>(&out),
+                _ => bar::<3>(&out),
+            }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -68,64 +125,224 @@ fn main() -> ExitCode {
     }
 }
 
-fn disks(out: &std::path::Path) -> Result<(), String> {
-    let mut sim = colliding_disks(40).map_err(|e| e.to_string())?;
-    let mut series = VtkSeries::new(out.join("disks"));
-    let (p0, e0) = (sim.particles().momentum(), sim.particles().kinetic_energy());
-    println!(
-        "scene: two colliding neo-Hookean disks, {} particles, grid 40 x 40, quadratic B-spline, APIC, USL",
-        sim.particles().len()
-    );
-    let t_end = 3.0;
-    let frame_every = 0.1;
-    let start = Instant::now();
-    let mut next_frame = 0.0;
-    let mut min_total: f64 = f64::INFINITY;
-    while sim.time() < t_end - 1e-12 {
-        if sim.time() >= next_frame - 1e-12 {
-            series.write_frame(&sim).map_err(|e| e.to_string())?;
-            next_frame += frame_every;
-        }
-        let dt = sim
-            .stable_dt(0.3)
-            .map_err(|e| e.to_string())?
-            .min(t_end - sim.time());
-        sim.step(dt).map_err(|e| e.to_string())?;
-        min_total = min_total.min(sim.particles().kinetic_energy() + sim.strain_energy());
+/// A scene from a file path or a bundled name.
+fn load(scene: &str) -> Result<Scene, String> {
+    if let Some((name, text)) = BUNDLED.iter().find(|(n, _)| *n == scene) {
+        return Scene::from_toml(text, &format!("bundled scene {name}")).map_err(|e| e.message);
     }
-    series.write_frame(&sim).map_err(|e| e.to_string())?;
-    let wall = start.elapsed().as_secs_f64();
-    let ps = sim.particles();
-    let p1 = ps.momentum();
-    let e1 = ps.kinetic_energy() + sim.strain_energy();
-    let pmax = ps
-        .pressure
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
-    println!(
-        "steps: {}, simulated time: {:.3} s, wall time: {:.2} s, {:.2e} particle-steps/s",
-        sim.steps(),
-        sim.time(),
-        wall,
-        (ps.len() as f64 * sim.steps() as f64) / wall
-    );
-    println!(
-        "momentum: start ({:.6e}, {:.6e}), end ({:.6e}, {:.6e})",
-        p0[0], p0[1], p1[0], p1[1]
-    );
-    println!("energy (kinetic + strain): start {e0:.6e} J/m, end {e1:.6e} J/m, lowest {min_total:.6e} J/m ({:.1}% kept)",
-        100.0 * e1 / e0);
-    println!("largest pressure at the end: {pmax:.4e} Pa");
-    println!(
-        "output: {} frames, open {}.pvd in ParaView",
-        series.frames(),
-        series.prefix().display()
-    );
+    if !Path::new(scene).exists() {
+        let names: Vec<&str> = BUNDLED.iter().map(|(n, _)| *n).collect();
+        return Err(format!(
+            "{scene}: no such file, and not a bundled scene ({})",
+            names.join(", ")
+        ));
+    }
+    Scene::load(scene).map_err(|e| e.message)
+}
+
+fn check(scene: &str) -> Result<(), String> {
+    let s = load(scene)?;
+    let sim = s.build().map_err(|e| e.message)?;
+    match &sim {
+        SceneSim::D2(m) => describe(&s, m),
+        SceneSim::D3(m) => describe(&s, m),
+    }
+    println!("ok");
     Ok(())
 }
 
-fn bar<const D: usize>(out: &std::path::Path) -> Result<(), String> {
+fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
+    let g = sim.grid();
+    let o = sim.options();
+    println!("scene: {}", scene.title);
+    println!(
+        "{D}D, grid {} cells of {:e} m, {} particles, {} materials, shape {:?}, {:?}, {:?}, {:?}",
+        g.cells
+            .iter()
+            .map(|c| c.to_string())
+            .collect::<Vec<_>>()
+            .join(" x "),
+        g.cell_size,
+        sim.particles().len(),
+        sim.materials().len(),
+        o.shape,
+        o.integration,
+        o.transfer,
+        o.scheme
+    );
+}
+
+fn run(args: RunArgs) -> Result<(), String> {
+    let name = args.scene.clone().unwrap_or_else(|| "disks".into());
+    let mut scene = load(&name)?;
+    if let Some(t) = args.end_time {
+        scene.run.end_time = t;
+    }
+    if let Some(f) = args.frames {
+        scene.run.frames = f;
+    }
+    if let Some(c) = args.cfl {
+        scene.run.cfl = c;
+    }
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| format!("--threads {n}: {e}"))?;
+    }
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
+    match scene.build().map_err(|e| e.message)? {
+        SceneSim::D2(mut sim) => run_scene(&scene, &mut sim, &args),
+        SceneSim::D3(mut sim) => run_scene(&scene, &mut sim, &args),
+    }
+}
+
+/// Steps to the end time in chunks of adaptive steps, writing frames and updating the bar.
+fn run_scene<const D: usize>(
+    scene: &Scene,
+    sim: &mut Sim<D>,
+    args: &RunArgs,
+) -> Result<(), String> {
+    describe(scene, sim);
+    let run = &scene.run;
+    let end = run.end_time;
+    let mut series = VtkSeries::new(args.out.join(&run.output));
+    // Progress is updated once per chunk; a frame is written every `per_frame` chunks.
+    let per_frame = if run.frames == 0 {
+        1
+    } else {
+        100usize.div_ceil(run.frames)
+    };
+    let chunks = if run.frames == 0 {
+        100
+    } else {
+        run.frames * per_frame
+    };
+    let interactive = !args.quiet && std::io::stderr().is_terminal();
+    let bar = if interactive {
+        let bar = ProgressBar::new(chunks as u64);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30.cyan/blue} {percent:>3}%  {msg}  [{elapsed_precise} elapsed, {eta_precise} left]",
+            )
+            .expect("a valid template"),
+        );
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let p0 = sim.particles().momentum();
+    let e0 = sim.particles().kinetic_energy() + sim.strain_energy();
+    let n = sim.particles().len() as f64;
+    let start = Instant::now();
+    let frame = |series: &mut VtkSeries, sim: &Sim<D>| {
+        series
+            .write_frame(sim)
+            .map_err(|e| format!("writing a frame: {}", e.message))
+    };
+    if run.frames > 0 {
+        frame(&mut series, sim)?;
+    }
+    for k in 1..=chunks {
+        let target = end * k as f64 / chunks as f64;
+        if target > sim.time() {
+            sim.advance(target - sim.time(), run.cfl).map_err(|e| {
+                bar.abandon();
+                format!(
+                    "the run stopped at t = {:e} after {} steps: {}",
+                    sim.time(),
+                    sim.steps(),
+                    e.message
+                )
+            })?;
+        }
+        let wall = start.elapsed().as_secs_f64();
+        let rate = n * sim.steps() as f64 / wall.max(1e-9);
+        bar.set_message(format!(
+            "step {}  t = {:.4e} of {:.4e} s  {:.2e} particle-steps/s",
+            sim.steps(),
+            sim.time(),
+            end,
+            rate
+        ));
+        bar.set_position(k as u64);
+        if run.frames > 0 && k % per_frame == 0 {
+            frame(&mut series, sim)?;
+            if !interactive && !args.quiet {
+                println!(
+                    "frame {:>3}/{}  step {:>6}  t = {:.4e} s  {:.2e} particle-steps/s",
+                    k / per_frame,
+                    run.frames,
+                    sim.steps(),
+                    sim.time(),
+                    rate
+                );
+            }
+        }
+    }
+    bar.finish_and_clear();
+    summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
+    Ok(())
+}
+
+fn summary<const D: usize>(
+    sim: &Sim<D>,
+    p0: rkmpm::Vector<D>,
+    e0: f64,
+    wall: f64,
+    series: &VtkSeries,
+) {
+    let ps = sim.particles();
+    let p1 = ps.momentum();
+    let e1 = ps.kinetic_energy() + sim.strain_energy();
+    let fmt = |v: &rkmpm::Vector<D>| {
+        v.iter()
+            .map(|c| format!("{c:.4e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "steps: {}, simulated time: {:.4e} s, wall time: {:.2} s, {:.2e} particle-steps/s",
+        sim.steps(),
+        sim.time(),
+        wall,
+        ps.len() as f64 * sim.steps() as f64 / wall.max(1e-9)
+    );
+    println!("momentum: start ({}), end ({})", fmt(&p0), fmt(&p1));
+    println!(
+        "energy: kinetic + stored {e0:.4e} at the start, {:.4e} + {:.4e} = {e1:.4e} at the end",
+        ps.kinetic_energy(),
+        sim.strain_energy()
+    );
+    let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    if !ps.plastic.is_empty() {
+        let plastic: Vec<f64> = ps.plastic.iter().map(|s| s.plastic_strain).collect();
+        let damage: Vec<f64> = ps.plastic.iter().map(|s| s.damage).collect();
+        println!(
+            "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
+            largest(&plastic),
+            largest(&damage),
+            damage.iter().filter(|&&d| d >= 1.0).count()
+        );
+    }
+    println!(
+        "largest pressure at the end: {:.4e} Pa",
+        ps.pressure
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    );
+    if series.frames() > 0 {
+        println!(
+            "output: {} frames, open {}.pvd in ParaView",
+            series.frames(),
+            series.prefix().display()
+        );
+    }
+}
+
+fn bar<const D: usize>(out: &Path) -> Result<(), String> {
     let bar = VibratingBar::default();
     let mut sim = bar.build::<D>().map_err(|e| e.to_string())?;
     println!(

@@ -89,7 +89,11 @@ impl<const D: usize> BoundaryPoints<D> {
         volumes: &[f64],
     ) -> (Vec<Vector<D>>, Vec<Vector<D>>) {
         let spacing: Vec<f64> = volumes.iter().map(|v| v.powf(1.0 / D as f64)).collect();
-        let bin = spacing.iter().copied().fold(f64::INFINITY, f64::min);
+        // Bins as large as the largest spacing: a neighbour within a quarter spacing of a site
+        // is then in the site's bin or next to it, however different the particle sizes are
+        // (binning by the smallest spacing made the search span grow as the ratio of the
+        // spacings, without bound: found by fuzzing).
+        let bin = spacing.iter().copied().fold(0.0, f64::max);
         let key =
             |x: &Vector<D>| -> [i64; D] { std::array::from_fn(|a| (x[a] / bin).floor() as i64) };
         let mut bins: HashMap<[i64; D], Vec<usize>> = HashMap::new();
@@ -98,7 +102,8 @@ impl<const D: usize> BoundaryPoints<D> {
         }
         let occupied = |site: &Vector<D>, tol: f64| -> bool {
             let c = key(site);
-            let reach = (tol / bin).ceil() as i64;
+            debug_assert!(tol <= bin);
+            let reach = 1i64;
             let mut k = [0i64; D];
             let span = (2 * reach + 1) as usize;
             for i in 0..span.pow(D as u32) {

@@ -293,6 +293,19 @@ impl JohnsonCook {
         ((k + 4.0 / 3.0 * self.elastic.mu) * j / self.elastic.density).sqrt()
     }
 
+    /// Stored energy per unit reference volume of a point in state `state`: the elastic energy
+    /// of `F_e`, or for a failed (or melted) point, which carries no deviator and no tension,
+    /// only the bulk energy of compression.
+    pub fn stored_energy(&self, state: &PlasticState) -> f64 {
+        let fe = &state.elastic_deformation;
+        if state.damage >= 1.0 || self.homologous(state.heating) >= 1.0 {
+            let vol = fe.determinant().ln();
+            let k = self.elastic.lambda + 2.0 / 3.0 * self.elastic.mu;
+            return if vol < 0.0 { 0.5 * k * vol * vol } else { 0.0 };
+        }
+        self.elastic_energy(fe)
+    }
+
     /// Elastic energy per unit reference volume of `F_e` (Hencky shear part plus the bulk part of
     /// Hencky's law; the EOS energy is not included).
     pub fn elastic_energy(&self, fe: &Matrix3<f64>) -> f64 {

@@ -164,8 +164,7 @@ impl Material {
                     / s.elastic_deformation.determinant()
             }
             (Material::JohnsonCook(m), Some(s)) => {
-                m.elastic_energy(&s.elastic_deformation) * f.determinant()
-                    / s.elastic_deformation.determinant()
+                m.stored_energy(s) * f.determinant() / s.elastic_deformation.determinant()
             }
             _ => self.strain_energy_density(f),
         }

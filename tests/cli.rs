@@ -1,0 +1,129 @@
+//! The command-line runner, as a user runs it: a bundled scene end to end, a scene file with a
+//! misspelt key, the help and the bundled-scene listing.
+
+use std::process::Command;
+
+fn rkmpm(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_rkmpm"))
+        .args(args)
+        .output()
+        .expect("the runner starts");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("rkmpm-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// The vibrating bar scene runs one period: 40 frames plus the first, a .pvd naming all of
+/// them, and a summary; momentum and energy are printed.
+#[test]
+fn runs_a_bundled_scene_to_its_end() {
+    let out = scratch("bar");
+    let (ok, stdout, stderr) = rkmpm(&["run", "bar", "--quiet", "--out", out.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("simulated time: 4.0000e-1 s"), "{stdout}");
+    assert!(
+        stdout.contains("momentum: start") && stdout.contains("energy"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("41 frames"), "{stdout}");
+    let pvd = std::fs::read_to_string(out.join("bar.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 41);
+    for k in 0..41 {
+        assert!(out.join(format!("bar_{k:05}.vtu")).exists(), "frame {k}");
+    }
+    std::fs::remove_dir_all(out).unwrap();
+}
+
+/// Overrides: `--end-time`, `--frames 0` (no output) and a scene file by path.
+#[test]
+fn runs_a_scene_file_with_overrides() {
+    let out = scratch("file");
+    std::fs::create_dir_all(&out).unwrap();
+    let (ok, toml, _) = rkmpm(&["show", "disks"]);
+    assert!(ok);
+    let file = out.join("my_disks.toml");
+    std::fs::write(
+        &file,
+        toml.replace("output = \"disks\"", "output = \"mine\""),
+    )
+    .unwrap();
+    let (ok, stdout, stderr) = rkmpm(&[
+        file.to_str().unwrap(),
+        "--end-time",
+        "0.1",
+        "--frames",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("simulated time: 1.0000e-1 s"), "{stdout}");
+    assert!(out.join("mine.pvd").exists() && out.join("mine_00002.vtu").exists());
+    std::fs::remove_dir_all(out).unwrap();
+}
+
+/// A misspelt key fails with the file, the line and the field; nothing runs.
+#[test]
+fn a_bad_scene_file_names_the_line_and_the_field() {
+    let out = scratch("bad");
+    std::fs::create_dir_all(&out).unwrap();
+    let (_, toml, _) = rkmpm(&["show", "disks"]);
+    let file = out.join("bad.toml");
+    std::fs::write(&file, toml.replace("poisson = 0.3", "poison = 0.3")).unwrap();
+    let (ok, stdout, stderr) = rkmpm(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    let line = toml.lines().position(|l| l.starts_with("poisson")).unwrap() + 1;
+    assert!(
+        stderr.contains(&format!(
+            "bad.toml: line {line}, column 1 (`poison = 0.3`): unknown field `poison`"
+        )),
+        "{stderr}"
+    );
+    assert!(stdout.is_empty() || !stdout.contains("steps:"));
+    assert!(!out.join("disks.pvd").exists());
+    let (ok, _, stderr) = rkmpm(&["run", "no-such-scene"]);
+    assert!(!ok && stderr.contains("not a bundled scene"), "{stderr}");
+    std::fs::remove_dir_all(out).unwrap();
+}
+
+#[test]
+fn help_and_listing() {
+    let (ok, stdout, _) = rkmpm(&["--help"]);
+    assert!(ok);
+    for word in [
+        "run",
+        "check",
+        "list",
+        "show",
+        "verify",
+        "--out",
+        "--end-time",
+        "--frames",
+        "--cfl",
+        "--threads",
+        "--quiet",
+    ] {
+        assert!(stdout.contains(word), "--help lacks {word}");
+    }
+    let (ok, stdout, _) = rkmpm(&["list"]);
+    assert!(ok);
+    for name in ["disks", "bar", "collapse", "taylor", "penetration"] {
+        assert!(
+            stdout.lines().any(|l| l.starts_with(name)),
+            "list lacks {name}"
+        );
+    }
+}

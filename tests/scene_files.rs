@@ -1,0 +1,106 @@
+//! The bundled scene files (`scenes/*.toml`) build the same simulations as the scenes written
+//! in Rust that the tests and the validation examples use: same grid, options, materials and
+//! particles, bit for bit. So a run of a scene file is a run of the validated scene.
+
+use rkmpm::scene::{Scene, SceneSim, BUNDLED};
+use rkmpm::scenes::{colliding_disks, GranularColumn, Penetration, TaylorBar, VibratingBar};
+use rkmpm::Sim;
+
+fn scene(name: &str) -> SceneSim {
+    let text = BUNDLED.iter().find(|(n, _)| *n == name).unwrap().1;
+    Scene::from_toml(text, name).unwrap().build().unwrap()
+}
+
+/// Same simulation; positions may differ by `slack` (the Rust penetration scene offsets its
+/// lattice from the plate's face, the scene file from the grid's origin: the same points, a
+/// rounding apart).
+fn same<const D: usize>(name: &str, file: &Sim<D>, rust: &Sim<D>) {
+    close(name, file, rust, 0.0);
+}
+
+fn close<const D: usize>(name: &str, file: &Sim<D>, rust: &Sim<D>, slack: f64) {
+    assert_eq!(file.grid().cells, rust.grid().cells, "{name}: cells");
+    assert_eq!(
+        file.grid().cell_size.to_bits(),
+        rust.grid().cell_size.to_bits(),
+        "{name}: h"
+    );
+    assert_eq!(file.grid().origin, rust.grid().origin, "{name}: origin");
+    assert_eq!(file.options(), rust.options(), "{name}: options");
+    assert_eq!(file.materials(), rust.materials(), "{name}: materials");
+    assert_eq!(
+        file.particles().len(),
+        rust.particles().len(),
+        "{name}: particle count"
+    );
+    let (a, b) = (file.particles(), rust.particles());
+    if let Some(p) = (0..a.len()).find(|&p| (a.position[p] - b.position[p]).norm() > slack) {
+        panic!(
+            "{name}: particle {p} at {:?} (file) and {:?} (Rust)",
+            a.position[p].as_slice(),
+            b.position[p].as_slice()
+        );
+    }
+    let mut a = a.clone();
+    a.position.clone_from(&b.position);
+    a.reference_position.clone_from(&b.reference_position);
+    assert!(&a == b, "{name}: particles differ");
+}
+
+#[test]
+fn disks() {
+    let SceneSim::D2(file) = scene("disks") else {
+        panic!("2D")
+    };
+    same("disks", &file, &colliding_disks(40).unwrap());
+}
+
+#[test]
+fn vibrating_bar() {
+    let SceneSim::D2(file) = scene("bar") else {
+        panic!("2D")
+    };
+    same("bar", &file, &VibratingBar::default().build::<2>().unwrap());
+}
+
+#[test]
+fn column_collapse() {
+    let SceneSim::D2(file) = scene("collapse") else {
+        panic!("2D")
+    };
+    let column = GranularColumn {
+        aspect: 2.0,
+        ..Default::default()
+    };
+    let rust = column.build().unwrap();
+    same("collapse", &file, &rust);
+}
+
+#[test]
+fn taylor_bar() {
+    let SceneSim::D3(file) = scene("taylor") else {
+        panic!("3D")
+    };
+    let rust = TaylorBar {
+        cells_per_radius: 4,
+        ..Default::default()
+    }
+    .build()
+    .unwrap();
+    same("taylor", &file, &rust);
+}
+
+#[test]
+fn penetration() {
+    let SceneSim::D2(file) = scene("penetration") else {
+        panic!("2D")
+    };
+    let rust = Penetration {
+        impact_speed: 350.0,
+        ..Default::default()
+    }
+    .build::<2>()
+    .unwrap();
+    // 1e-16 m: a rounding (an ulp) of positions of order 0.1 m.
+    close("penetration", &file, &rust, 1e-16);
+}
