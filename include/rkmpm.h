@@ -162,6 +162,19 @@ typedef int32_t (*RkmpmBodyForceFn)(void *user_data,
                                     double *accelerations);
 
 /**
+ * Progress of `rkmpm_sim_advance`, called after every one of its steps on the thread that calls
+ * it, with `user_data`, the simulation's step count, the time now, the time the run ends at and
+ * the step just taken. Return 0 to go on; any other value stops the run after this step with
+ * `RKMPM_ERR_CALLBACK` (the steps taken stand). The callback must not call any `rkmpm_sim_*`
+ * function on the simulation that is advancing.
+ */
+typedef int32_t (*RkmpmProgressFn)(void *user_data,
+                                   uint64_t steps,
+                                   double time,
+                                   double end_time,
+                                   double dt);
+
+/**
  * Johnson–Cook metal for `rkmpm_sim_add_material_johnson_cook` (SI units, temperatures in
  * kelvin). Yield stress `(a + b ε̄^n)(1 + c ln max(ε̇/reference_strain_rate, 1))(1 − T*^m)`,
  * `T* = (T − room_temperature)/(melt_temperature − room_temperature)`; adiabatic heating
@@ -526,6 +539,15 @@ enum RkmpmStatus rkmpm_sim_set_boundary(struct RkmpmSim *sim,
 enum RkmpmStatus rkmpm_sim_set_body_force(struct RkmpmSim *sim,
                                           RkmpmBodyForceFn f,
                                           void *user_data);
+
+/**
+ * Sets (or, with `f` NULL, removes) the progress callback of `rkmpm_sim_advance`; see
+ * `RkmpmProgressFn`. It is not part of a checkpoint.
+ *
+ * # Safety
+ * `sim` must be a live handle; `f` must stay callable and `user_data` valid while set.
+ */
+enum RkmpmStatus rkmpm_sim_set_progress(struct RkmpmSim *sim, RkmpmProgressFn f, void *user_data);
 
 /**
  * Adds a small-strain linear elastic material (density > 0, Young's modulus > 0,

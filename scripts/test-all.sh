@@ -1,14 +1,18 @@
 #!/usr/bin/env bash
 # Every test of rkmpm: the Rust unit, integration and doc tests (the header check among them),
-# then the C and Fortran drivers built by CMake and run under CTest, then the same drivers again
-# under AddressSanitizer/LeakSanitizer/UndefinedBehaviorSanitizer (-DRKMPM_SANITIZE=ON).
-# Installs gfortran and cmake with apt-get when they are missing (as root; otherwise says how).
+# then the C and Fortran drivers built by CMake and run under CTest, then the installed package
+# (CMake and pkg-config) used by outside C and Fortran projects (scripts/test-install.sh), then
+# the drivers again under AddressSanitizer/LeakSanitizer/UndefinedBehaviorSanitizer
+# (-DRKMPM_SANITIZE=ON).
+# Installs gfortran, cmake and pkg-config with apt-get when they are missing (as root; otherwise
+# says how).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 missing=()
 command -v gfortran >/dev/null || missing+=(gfortran)
 command -v cmake >/dev/null || missing+=(cmake)
+command -v pkg-config >/dev/null || missing+=(pkg-config)
 command -v cc >/dev/null || missing+=(gcc)
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
@@ -30,6 +34,9 @@ build=build/examples
 cmake -S examples -B "$build" -DCMAKE_BUILD_TYPE=Release -DRKMPM_CARGO_TARGET_DIR="$PWD/target" >/dev/null
 cmake --build "$build" -j 2
 ctest --test-dir "$build" --output-on-failure
+
+echo "== Install (CMake package, pkg-config) and outside C and Fortran projects built against it"
+scripts/test-install.sh "$PWD/target"
 
 echo "== The same drivers under AddressSanitizer, LeakSanitizer and UndefinedBehaviorSanitizer"
 asan=build/examples-sanitized

@@ -132,6 +132,22 @@ module rkmpm
       end function rkmpm_body_force_fn
    end interface
 
+   public :: rkmpm_progress_fn
+   abstract interface
+      !> typedef int32_t (*RkmpmProgressFn)(void *user_data, uint64_t steps, double time,
+      !>     double end_time, double dt);
+      !>
+      !> Progress of advance, called after each of its steps: return 0 to go on; any other value
+      !> stops the run there with RKMPM_ERR_CALLBACK (the steps taken stand). It must not call
+      !> back into the simulation that is advancing.
+      integer(c_int32_t) function rkmpm_progress_fn(user_data, steps, time, end_time, dt) bind(C)
+         import :: c_ptr, c_double, c_int64_t, c_int32_t
+         type(c_ptr), value :: user_data
+         integer(c_int64_t), value :: steps
+         real(c_double), value :: time, end_time, dt
+      end function rkmpm_progress_fn
+   end interface
+
    ! ---------------------------------------------------------------------------------------------
    ! The simulation handle
    ! ---------------------------------------------------------------------------------------------
@@ -153,6 +169,7 @@ module rkmpm
       procedure :: set_gravity => sim_set_gravity
       procedure :: set_boundary => sim_set_boundary
       procedure :: set_body_force => sim_set_body_force
+      procedure :: set_progress => sim_set_progress
       procedure :: add_material_linear_elastic => sim_add_material_linear_elastic
       procedure :: add_material_neo_hookean => sim_add_material_neo_hookean
       procedure :: add_material_drucker_prager => sim_add_material_drucker_prager
@@ -298,6 +315,16 @@ module rkmpm
          type(c_funptr), value :: f
          type(c_ptr), value :: user_data
       end function rkmpm_sim_set_body_force
+
+      ! enum RkmpmStatus rkmpm_sim_set_progress(struct RkmpmSim *sim, RkmpmProgressFn f,
+      !                                         void *user_data);
+      integer(c_int) function rkmpm_sim_set_progress(sim, f, user_data) &
+         bind(C, name="rkmpm_sim_set_progress")
+         import :: c_int, c_ptr, c_funptr
+         type(c_ptr), value :: sim
+         type(c_funptr), value :: f
+         type(c_ptr), value :: user_data
+      end function rkmpm_sim_set_progress
 
       ! enum RkmpmStatus rkmpm_sim_add_material_linear_elastic(struct RkmpmSim *sim, double density,
       !                                                        double young, double poisson,
@@ -802,6 +829,25 @@ contains
       call report(rkmpm_sim_set_body_force(self%h, fp, ud), 'set_body_force', stat, text)
       if (present(errmsg)) errmsg = text
    end subroutine sim_set_body_force
+
+   !> Sets the progress callback of advance `f` (a bind(C) function with the interface
+   !> rkmpm_progress_fn) and its `user_data`. Without `f`, removes the callback.
+   subroutine sim_set_progress(self, f, user_data, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      procedure(rkmpm_progress_fn), optional :: f
+      type(c_ptr), intent(in), optional :: user_data
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      type(c_funptr) :: fp
+      type(c_ptr) :: ud
+      fp = c_null_funptr
+      ud = c_null_ptr
+      if (present(f)) fp = c_funloc(f)
+      if (present(user_data)) ud = user_data
+      call report(rkmpm_sim_set_progress(self%h, fp, ud), 'set_progress', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_progress
 
    !> Adds a small-strain linear elastic material; `id` receives its id (for add_particles).
    subroutine sim_add_material_linear_elastic(self, density, young, poisson, id, stat, errmsg)

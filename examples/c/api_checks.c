@@ -231,6 +231,23 @@ static double stable_dt(const Fixture *f, double cfl) {
 
 static void take_step(Fixture *f) { RKMPM_CHECK(rkmpm_sim_step(f->sim, stable_dt(f, 0.5))); }
 
+/* Progress callback: counts its calls, records the last report, stops at call `stop_at`. */
+typedef struct {
+  int calls;
+  int stop_at;
+  uint64_t steps;
+  double time, end_time;
+} ProgressData;
+
+static int32_t progress(void *user_data, uint64_t steps, double time, double end_time, double dt) {
+  ProgressData *data = user_data;
+  ++data->calls;
+  data->steps = steps;
+  data->time = time;
+  data->end_time = end_time;
+  return (dt <= 0.0 || data->calls == data->stop_at) ? 1 : 0;
+}
+
 /* A block that has taken one step. */
 static Fixture stepped_block(uint32_t dim) {
   Fixture f = block(dim);
@@ -1038,6 +1055,30 @@ static void option_rows(void) {
     CALL(f.sim, rkmpm_sim_set_body_force(f.sim, NULL, &data));
     take_step(&f);
     EXPECT(data.calls == 1, "a removed callback was called");
+    drop(&f);
+  }
+
+  /* ---- rkmpm_sim_set_progress ---- */
+  ROW("set_progress.null_sim", RKMPM_ERR_NULL_POINTER) {
+    ProgressData data = {0, 0, 0, 0.0, 0.0};
+    CALL(NULL, rkmpm_sim_set_progress(NULL, progress, &data));
+    EXPECT(data.calls == 0, "the callback was called");
+  }
+  ROW("set_progress.null_function", RKMPM_OK) {
+    Fixture f = block(2);
+    ProgressData data = {0, 0, 0, 0.0, 0.0};
+    RKMPM_CHECK(rkmpm_sim_set_progress(f.sim, progress, &data));
+    uint64_t n = 0;
+    RKMPM_CHECK(rkmpm_sim_advance(f.sim, 3.0 * stable_dt(&f, 0.5), 0.5, &n));
+    EXPECT(data.calls == (int)n && n >= 2, "%d progress calls for %llu steps", data.calls,
+           (unsigned long long)n);
+    double t = 0.0;
+    RKMPM_CHECK(rkmpm_sim_time(f.sim, &t));
+    EXPECT(data.time == t && data.end_time == t && data.steps == n,
+           "the last report is not the end of the run");
+    CALL(f.sim, rkmpm_sim_set_progress(f.sim, NULL, &data));
+    RKMPM_CHECK(rkmpm_sim_advance(f.sim, stable_dt(&f, 0.5), 0.5, NULL));
+    EXPECT(data.calls == (int)n, "a removed callback was called");
     drop(&f);
   }
 }
@@ -1965,6 +2006,19 @@ static void step_rows(void) {
     uint64_t n = 77;
     CALL(f.sim, rkmpm_sim_advance(f.sim, 10.0 * stable_dt(&f, 0.5), 0.5, &n));
     EXPECT(n == 0, "wrote %llu steps", (unsigned long long)n);
+    drop(&f);
+  }
+  ROW("advance.stopped_by_progress", RKMPM_ERR_CALLBACK) {
+    /* The progress callback stops the run after its second call: two steps stand. */
+    Fixture f = block(2);
+    ProgressData data = {0, 2, 0, 0.0, 0.0};
+    RKMPM_CHECK(rkmpm_sim_set_progress(f.sim, progress, &data));
+    uint64_t n = 77;
+    CALL(NULL, rkmpm_sim_advance(f.sim, 10.0 * stable_dt(&f, 0.5), 0.5, &n));
+    EXPECT(n == 2 && data.calls == 2, "%llu steps, %d calls", (unsigned long long)n, data.calls);
+    uint64_t steps = 0;
+    RKMPM_CHECK(rkmpm_sim_step_count(f.sim, &steps));
+    EXPECT(steps == 2, "%llu steps taken", (unsigned long long)steps);
     drop(&f);
   }
   ROW("advance.later_step_fails", RKMPM_ERR_CALLBACK) {

@@ -9,10 +9,12 @@
 
 !> Body-force callbacks (bind(C) procedures cannot be internal procedures).
 module error_handling_callbacks
-   use, intrinsic :: iso_c_binding, only: c_ptr, c_double, c_size_t, c_int32_t, c_f_pointer, c_associated
+   use, intrinsic :: iso_c_binding, only: c_ptr, c_double, c_size_t, c_int32_t, c_int64_t, c_f_pointer, &
+                                          c_associated
    implicit none (type, external)
    private
    public :: force_data, FORCE_RECORD, FORCE_FAIL, FORCE_CONVERGE, body_force
+   public :: progress_data, progress
 
    integer, parameter :: FORCE_RECORD = 0, FORCE_FAIL = 1, FORCE_CONVERGE = 2
 
@@ -24,6 +26,13 @@ module error_handling_callbacks
       real(c_double) :: last_time = -1
       real(c_double) :: k = 0, center = 0
    end type force_data
+
+   !> Counts the calls of the progress callback and stops the run at call `stop_at`.
+   type :: progress_data
+      integer :: calls = 0, stop_at = 0
+      integer(c_int64_t) :: last_steps = -1
+      real(c_double) :: last_time = -1, last_end = -1
+   end type progress_data
 
 contains
 
@@ -59,6 +68,20 @@ contains
       end select
    end function body_force
 
+   integer(c_int32_t) function progress(user_data, steps, time, end_time, dt) bind(C)
+      type(c_ptr), value :: user_data
+      integer(c_int64_t), value :: steps
+      real(c_double), value :: time, end_time, dt
+      type(progress_data), pointer :: data
+      call c_f_pointer(user_data, data)
+      data%calls = data%calls + 1
+      data%last_steps = steps
+      data%last_time = time
+      data%last_end = end_time
+      progress = 0
+      if (dt <= 0 .or. data%calls == data%stop_at) progress = 1
+   end function progress
+
 end module error_handling_callbacks
 
 program error_handling
@@ -83,6 +106,7 @@ program error_handling
    integer(c_size_t) :: n0
    integer(c_int64_t) :: steps0, taken
    type(force_data), target :: force
+   type(progress_data), target :: watch
    character(len=64) :: names(0:13)
    real(c_double) :: bx(2, 2), bn(2, 2)
 
@@ -331,6 +355,20 @@ program error_handling
    call expect(st, RKMPM_OK, msg, 'advance by 3.5 dt at cfl 0.5')
    call expect_true(taken >= 2, 'advance took at least 2 steps (stable steps of about 1.25 dt)')
    call expect_true(sim%time() == t0 + 3.5_c_double*dt, 'advance ends exactly at the requested time')
+   ! The progress callback sees every step and can stop the run: two steps stand.
+   watch%stop_at = 2
+   call sim%set_progress(progress, c_loc(watch), stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'set the progress callback')
+   steps0 = sim%step_count()
+   call sim%advance(100*dt, 0.5_c_double, taken, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_CALLBACK, msg, 'advance stopped by the progress callback')
+   call expect_true(taken == 2 .and. watch%calls == 2, 'two steps, two progress calls')
+   call expect_true(watch%last_steps == steps0 + 2, 'the callback gets the step count')
+   call expect_true(watch%last_time == sim%time(), 'the callback gets the time')
+   call sim%set_progress(stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'remove the progress callback')
+   call sim%advance(dt, 0.5_c_double, taken)
+   call expect_true(watch%calls == 2, 'a removed progress callback is not called')
 
    ! ---- files ----
    call sim%write_vtk('rkmpm-no-such-directory/particles.vtu', stat=st, errmsg=msg)

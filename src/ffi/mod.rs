@@ -99,6 +99,21 @@ pub const RKMPM_FIELD_PLASTIC_STRAIN: RkmpmField = 9;
 /// 1 value: damage in [0, 1] (Johnson–Cook; 0 for other materials).
 pub const RKMPM_FIELD_DAMAGE: RkmpmField = 10;
 
+/// Progress of `rkmpm_sim_advance`, called after every one of its steps on the thread that calls
+/// it, with `user_data`, the simulation's step count, the time now, the time the run ends at and
+/// the step just taken. Return 0 to go on; any other value stops the run after this step with
+/// `RKMPM_ERR_CALLBACK` (the steps taken stand). The callback must not call any `rkmpm_sim_*`
+/// function on the simulation that is advancing.
+pub type RkmpmProgressFn = Option<
+    unsafe extern "C" fn(
+        user_data: *mut c_void,
+        steps: u64,
+        time: f64,
+        end_time: f64,
+        dt: f64,
+    ) -> i32,
+>;
+
 /// Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
 /// the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
 /// of every particle into `accelerations` and return 0; any other return value makes the step
@@ -126,6 +141,10 @@ enum AnySim {
 pub struct RkmpmSim {
     sim: AnySim,
     series: Vec<VtkSeries>,
+    progress: Option<(
+        unsafe extern "C" fn(*mut c_void, u64, f64, f64, f64) -> i32,
+        *mut c_void,
+    )>,
 }
 
 macro_rules! with_sim {
@@ -260,6 +279,7 @@ pub unsafe extern "C" fn rkmpm_sim_new(
         out.write(Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
+            progress: None,
         })));
         Ok(())
     })
@@ -307,6 +327,7 @@ pub unsafe extern "C" fn rkmpm_sim_load(
         out.write(Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
+            progress: None,
         })));
         Ok(())
     })
@@ -589,6 +610,24 @@ pub unsafe extern "C" fn rkmpm_sim_set_body_force(
         with_sim!(&mut s.sim, m => m.set_body_force(f.map(|f| {
             Box::new(CBodyForce { f, user: user_data, buffers: Default::default() }) as Box<_>
         })));
+        Ok(())
+    })
+}
+
+/// Sets (or, with `f` NULL, removes) the progress callback of `rkmpm_sim_advance`; see
+/// `RkmpmProgressFn`. It is not part of a checkpoint.
+///
+/// # Safety
+/// `sim` must be a live handle; `f` must stay callable and `user_data` valid while set.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_progress(
+    sim: *mut RkmpmSim,
+    f: RkmpmProgressFn,
+    user_data: *mut c_void,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_progress", || {
+        let s = sim_mut(sim)?;
+        s.progress = f.map(|f| (f, user_data));
         Ok(())
     })
 }
@@ -922,7 +961,13 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
             check_ptr("out_steps", out_steps)?;
         }
         let before = with_sim!(&s.sim, m => m.steps());
-        let result = with_sim!(&mut s.sim, m => m.advance(duration, cfl));
+        let progress = s.progress;
+        let mut observe = |p: crate::step::Progress| match progress {
+            // SAFETY: the caller promised the callback stays callable with its user data.
+            Some((f, user)) => unsafe { f(user, p.steps, p.time, p.end, p.dt) == 0 },
+            None => true,
+        };
+        let result = with_sim!(&mut s.sim, m => m.advance_observed(duration, cfl, &mut observe));
         if !out_steps.is_null() {
             // SAFETY: checked non-NULL and aligned; the caller promises it is writable.
             out_steps.write(with_sim!(&s.sim, m => m.steps()) - before);

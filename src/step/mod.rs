@@ -15,6 +15,7 @@ mod grid_to_particle;
 mod grid_update;
 mod particle_to_grid;
 mod timestep;
+pub use timestep::Progress;
 
 pub use grid_to_particle::{grid_to_particle, velocity_gradient, Fields, ParticleUpdate};
 pub use grid_update::grid_update;

@@ -1,8 +1,22 @@
 //! Adaptive time stepping: advance over a span of time with steps that stay a fixed fraction
 //! (the CFL number) of the critical step, recomputed before every step.
 
-use crate::error::{check_finite, Error, Result};
+use crate::error::{check_finite, Error, ErrorKind, Result};
 use crate::sim::Sim;
+
+/// Where an adaptive run stands, after one of its steps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Steps taken by the simulation so far (all runs).
+    pub steps: u64,
+    /// The simulated time now.
+    pub time: f64,
+    /// The time the run started at and the time it ends at.
+    pub start: f64,
+    pub end: f64,
+    /// The step just taken.
+    pub dt: f64,
+}
 
 impl<const D: usize> Sim<D> {
     /// Advances by `duration` (> 0) with steps of `cfl · h / max_p(c_p + |v_p|)`, the stable step
@@ -15,6 +29,17 @@ impl<const D: usize> Sim<D> {
     /// state after the last good step, and the error message says how many steps were taken
     /// and at which time it stopped.
     pub fn advance(&mut self, duration: f64, cfl: f64) -> Result<u64> {
+        self.advance_observed(duration, cfl, &mut |_| true)
+    }
+
+    /// [`Sim::advance`], calling `observe` after every step with the progress; when it returns
+    /// `false` the run stops there (the steps taken stand) with a `Callback` error.
+    pub fn advance_observed(
+        &mut self,
+        duration: f64,
+        cfl: f64,
+        observe: &mut dyn FnMut(Progress) -> bool,
+    ) -> Result<u64> {
         check_finite("duration", duration)?;
         if duration <= 0.0 {
             return Err(Error::invalid(format!(
@@ -61,6 +86,23 @@ impl<const D: usize> Sim<D> {
             if left <= stable {
                 // The rounded sum of the steps may miss `end` by an ulp: land on it.
                 self.time = end;
+            }
+            let progress = Progress {
+                steps: self.steps,
+                time: self.time,
+                start,
+                end,
+                dt,
+            };
+            if !observe(progress) {
+                return Err(Error::new(
+                    ErrorKind::Callback,
+                    format!(
+                        "stopped by the progress callback at t = {:e} of {end:e} ({taken} steps \
+                         taken, kept)",
+                        self.time
+                    ),
+                ));
             }
         }
         Ok(taken)
