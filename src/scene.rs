@@ -327,6 +327,9 @@ pub struct RunSpec {
     /// output directory).
     #[serde(default = "default_output")]
     pub output: String,
+    /// At the end, a PNG of the particles coloured by this field (`<output>.png`).
+    #[serde(default)]
+    pub png: Option<String>,
 }
 
 fn default_output() -> String {

@@ -39,6 +39,15 @@ fn runs_a_bundled_scene_to_its_end() {
     for k in 0..41 {
         assert!(out.join(format!("bar_{k:05}.vtu")).exists(), "frame {k}");
     }
+    // The bundled bar draws its final particles coloured by velocity: a real PNG.
+    let png = std::fs::read(out.join("bar.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let width = u32::from_be_bytes(png[16..20].try_into().unwrap());
+    assert_eq!(width, 1000);
+    assert!(
+        stdout.contains("picture: ") && stdout.contains("coloured by velocity"),
+        "{stdout}"
+    );
     std::fs::remove_dir_all(out).unwrap();
 }
 
@@ -61,12 +70,24 @@ fn runs_a_scene_file_with_overrides() {
         "0.1",
         "--frames",
         "2",
+        "--png",
+        "none",
         "--out",
         out.to_str().unwrap(),
     ]);
     assert!(ok, "{stderr}");
     assert!(stdout.contains("simulated time: 1.0000e-1 s"), "{stdout}");
     assert!(out.join("mine.pvd").exists() && out.join("mine_00002.vtu").exists());
+    assert!(!out.join("mine.png").exists(), "--png none draws nothing");
+    let (ok, _, stderr) = rkmpm(&[
+        "run",
+        "disks",
+        "--png",
+        "colour",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("choose one of"), "{stderr}");
     std::fs::remove_dir_all(out).unwrap();
 }
 

@@ -97,6 +97,7 @@ fn penetration() {
     };
     let rust = Penetration {
         impact_speed: 350.0,
+        plate_half_width: 60e-3,
         ..Default::default()
     }
     .build::<2>()

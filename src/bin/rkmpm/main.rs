@@ -2,6 +2,8 @@
 //! progress bar, writes VTK frames for ParaView and prints a summary. `rkmpm --help` explains
 //! every option.
 
+mod snapshot;
+
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use rkmpm::io::vtk::VtkSeries;
@@ -23,7 +25,7 @@ use std::time::Instant;
         no scene it runs the default one (two elastic disks collide). A scene is a TOML file (docs/SCENES.md lists every key) or the \
         name of a bundled scene (`rkmpm list`).",
     after_help = "Examples:\n  rkmpm                                  run the default scene into out/\n  \
-        rkmpm run scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80\n  \
+        rkmpm run scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80 --png damage\n  \
         rkmpm check my_scene.toml               read and build a scene without running it\n  \
         rkmpm list                              the bundled scenes"
 )]
@@ -80,6 +82,11 @@ struct RunArgs {
     /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
     #[arg(long)]
     cfl: Option<f64>,
+    /// Overrides the scene's run.png: at the end, write <out>/<output>.png, the particles
+    /// coloured by this field (velocity, displacement, stress, pressure, volume, mass,
+    /// deformation_gradient, plastic_strain, damage, material); `none` writes no picture.
+    #[arg(long, value_name = "FIELD")]
+    png: Option<String>,
     /// Worker threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
@@ -184,6 +191,17 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(c) = args.cfl {
         scene.run.cfl = c;
     }
+    if let Some(p) = &args.png {
+        scene.run.png = (p != "none").then(|| p.clone());
+    }
+    if let Some(p) = &scene.run.png {
+        if !snapshot::FIELDS.contains(&p.as_str()) {
+            return Err(format!(
+                "png = {p:?}: choose one of {}",
+                snapshot::FIELDS.join(", ")
+            ));
+        }
+    }
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -283,6 +301,11 @@ fn run_scene<const D: usize>(
     }
     bar.finish_and_clear();
     summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
+    if let Some(field) = &run.png {
+        let path = args.out.join(format!("{}.png", run.output));
+        snapshot::write(sim, field, &scene.title, &path)?;
+        println!("picture: {} (coloured by {field})", path.display());
+    }
     Ok(())
 }
 
