@@ -30,11 +30,6 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
- * Format version written by this build.
- */
-#define CHECKPOINT_VERSION 1
-
-/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -105,15 +100,6 @@ typedef enum RkmpmStatus {
    */
   RKMPM_ERR_OUT_OF_MEMORY = 15,
 } RkmpmStatus;
-
-/**
- * Measured laws for true 2D columns of aluminium rods, Nguyen, Bui & Fukagawa (2015), "Failure
- * mechanism of true 2D granular flows" (J. Chem. Eng. Japan 48(6); arXiv:1512.05180), with
- * `a = H0 / L0`: for `a ≥ 0.65`, `H0 / H∞ = 1.42 a^(2/3)`; run-out
- * `(L∞ − L0) / L0 = 3.25 a^0.96` for `0.65 ≤ a ≤ 1.5` and `3.80 a^0.73` for `a ≥ 1.5`; for
- * `a < 0.65` the top of the column is not reached (`H∞ = H0`).
- */
-typedef struct PowerLaws PowerLaws;
 
 /**
  * A simulation. Created by `rkmpm_sim_new`, owned by the caller, released by `rkmpm_sim_free`.
@@ -352,8 +338,6 @@ typedef uint32_t RkmpmField;
 #define RkmpmStatus_ALL { RKMPM_OK, RKMPM_ERR_NULL_POINTER, RKMPM_ERR_INVALID_ARGUMENT, RKMPM_ERR_BUFFER_TOO_SMALL, RKMPM_ERR_INVALID_STATE, RKMPM_ERR_UNKNOWN_MATERIAL, RKMPM_ERR_OUTSIDE_GRID, RKMPM_ERR_UNSTABLE_TIME_STEP, RKMPM_ERR_NON_FINITE, RKMPM_ERR_INVERTED_PARTICLE, RKMPM_ERR_CALLBACK, RKMPM_ERR_IO, RKMPM_ERR_UNSUPPORTED, RKMPM_ERR_PANIC, RKMPM_ERR_CORRUPT_FILE, RKMPM_ERR_OUT_OF_MEMORY, }
 
 
-
-#define NGUYEN_BUI_FUKAGAWA PowerLaws
 
 #ifdef __cplusplus
 extern "C" {

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Every test of rkmpm: the Rust unit, integration and doc tests (the header check among them),
-# then the C and Fortran drivers built by CMake and run under CTest, then the installed package
+# every C and Fortran block of the docs compiled and run (scripts/test-doc-snippets.sh), the VTK
+# output read back with meshio (scripts/test-vtk.sh), then the C and Fortran drivers built by
+# CMake and run under CTest, then the installed package
 # (CMake and pkg-config) used by outside C and Fortran projects (scripts/test-install.sh), then
 # the drivers again under AddressSanitizer/LeakSanitizer/UndefinedBehaviorSanitizer
 # (-DRKMPM_SANITIZE=ON).
@@ -28,6 +30,12 @@ fi
 export RUST_BACKTRACE=0
 echo "== Rust tests (cargo test --release)"
 cargo test --release
+
+echo "== Every C and Fortran block of README.md and docs/*.md compiles and runs; rustdoc without warnings"
+./scripts/test-doc-snippets.sh
+
+echo "== VTK output read back with a real reader (meshio, in build/vtk-venv)"
+./scripts/test-vtk.sh
 
 echo "== C and Fortran drivers (CMake + CTest)"
 build=build/examples
