@@ -1,0 +1,244 @@
+//! Throughput benchmark: particle-steps per second of one method on one block of neo-Hookean
+//! material, 2D or 3D, at a given particle count. Run by `scripts/bench.sh`; the peers
+//! (`bench/warp_mpm.py`, `bench/taichi_mpm.py`) build the same block, grid, material, velocity
+//! field and time step (the "benchmark block" below), so the quadratic B-spline APIC line is
+//! directly comparable with theirs.
+//!
+//! ```text
+//! cargo run --release --example throughput -- --dim 2 --method bspline2 --particles 65536 --steps 100
+//! RAYON_NUM_THREADS=1 cargo run --release --example throughput -- --dim 3 --method rk2 --vc --particles 100000
+//! ```
+//!
+//! Options: `--dim 2|3`, `--method linear|bspline2|bspline3|rk1|rk2`, `--vc` (VC integration of
+//! order 1, order 2 for rk2), `--particles N` (rounded to m^D with m even), `--steps S` (timed
+//! steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
+//! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
+//! `--header` (print the CSV header first). A step the engine rejects (an inverted particle, say)
+//! ends the timing: the line reports the steps before it (at least `--min-steps`) and the error
+//! goes to stderr.
+//!
+//! The benchmark block (shared with the peers, keep in sync):
+//! - m particles per direction (m even, m^D ≈ N), 2 per cell per direction, so the block is
+//!   b = m/2 cells wide; g = 4 + m/16 empty cells on every side; n = b + 2g cells per direction,
+//!   unit domain [0,1]^D, h = 1/n; particle i along an axis at (g + (i + 1/2)/2) h.
+//! - Neo-Hookean, ρ = 1000 kg/m³, E = 1e5 Pa, ν = 0.3; volume (h/2)^D, mass ρ (h/2)^D.
+//! - Velocity v_a = v0 (sin(π ξ_{a+1 mod D}) − ξ_a / 2), ξ = (x − 1/2) / (b h / 2) ∈ (−1, 1),
+//!   v0 = 0.01 c, c = sqrt((λ + 2μ)/ρ). No gravity, free faces (the block never reaches them).
+//! - dt = 0.4 h / (c + 1.5 sqrt(D) v0), fixed.
+//! - rkmpm: USL, APIC (PIC for rk2, which APIC does not support), material-point integration
+//!   unless `--vc`.
+//!
+//! Prints one CSV line: engine,dim,method,vc,transfer,particles,cells,threads,steps,dt,seconds,
+//! particle_steps_per_s,kinetic_energy (after warm-up + timed steps; a cross-check between the
+//! engines), setup_seconds.
+
+use rkmpm::{Integration, Material, Shape, Sim, Transfer, Vector};
+use std::process::ExitCode;
+use std::time::Instant;
+
+const DENSITY: f64 = 1000.0;
+const YOUNG: f64 = 1e5;
+const POISSON: f64 = 0.3;
+const CFL: f64 = 0.4;
+
+const HEADER: &str = "engine,dim,method,vc,transfer,particles,cells,threads,steps,dt,seconds,\
+particle_steps_per_s,kinetic_energy,setup_seconds";
+
+struct Args {
+    dim: usize,
+    method: String,
+    vc: bool,
+    particles: usize,
+    steps: usize,
+    warmup: usize,
+    max_seconds: Option<f64>,
+    min_steps: usize,
+    header: bool,
+}
+
+fn parse() -> Result<Args, String> {
+    let mut a = Args {
+        dim: 2,
+        method: "bspline2".into(),
+        vc: false,
+        particles: 65536,
+        steps: 50,
+        warmup: 2,
+        max_seconds: None,
+        min_steps: 5,
+        header: false,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(k) = it.next() {
+        let mut val = || it.next().ok_or_else(|| format!("{k} needs a value"));
+        match k.as_str() {
+            "--dim" => a.dim = val()?.parse().map_err(|e| format!("--dim: {e}"))?,
+            "--method" => a.method = val()?,
+            "--vc" => a.vc = true,
+            "--particles" => {
+                a.particles = val()?.parse().map_err(|e| format!("--particles: {e}"))?
+            }
+            "--steps" => a.steps = val()?.parse().map_err(|e| format!("--steps: {e}"))?,
+            "--warmup" => a.warmup = val()?.parse().map_err(|e| format!("--warmup: {e}"))?,
+            "--max-seconds" => {
+                a.max_seconds = Some(val()?.parse().map_err(|e| format!("--max-seconds: {e}"))?)
+            }
+            "--min-steps" => {
+                a.min_steps = val()?.parse().map_err(|e| format!("--min-steps: {e}"))?
+            }
+            "--header" => a.header = true,
+            "-h" | "--help" => {
+                return Err(
+                    "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
+                     [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
+                     [--min-steps K] [--header]"
+                        .into(),
+                )
+            }
+            _ => return Err(format!("unknown option {k} (see --help)")),
+        }
+    }
+    if a.dim != 2 && a.dim != 3 {
+        return Err(format!("--dim must be 2 or 3, got {}", a.dim));
+    }
+    Ok(a)
+}
+
+/// Particles per direction: m^D ≈ N, m even, at least 4.
+fn per_direction(n: usize, dim: usize) -> usize {
+    let m = (n as f64).powf(1.0 / dim as f64).round() as usize;
+    m.max(4).div_ceil(2) * 2
+}
+
+fn run<const D: usize>(a: &Args) -> Result<(), String> {
+    let e = |x: rkmpm::Error| x.to_string();
+    let setup = Instant::now();
+    let (shape, transfer, vc_order) = match a.method.as_str() {
+        "linear" => (Shape::Linear, Transfer::Apic, 1),
+        "bspline2" => (Shape::BSpline2, Transfer::Apic, 1),
+        "bspline3" => (Shape::BSpline3, Transfer::Apic, 1),
+        "rk1" => (
+            Shape::Rk {
+                order: 1,
+                support: 2.0,
+            },
+            Transfer::Apic,
+            1,
+        ),
+        "rk2" => (
+            Shape::Rk {
+                order: 2,
+                support: 3.0,
+            },
+            Transfer::PicFlip { flip: 0.0 },
+            2,
+        ),
+        m => return Err(format!("unknown method {m}")),
+    };
+    let m = per_direction(a.particles, D);
+    let b = m / 2;
+    let g = 4 + m / 16;
+    let n = b + 2 * g;
+    let h = 1.0 / n as f64;
+    let mu = YOUNG / (2.0 * (1.0 + POISSON));
+    let lambda = YOUNG * POISSON / ((1.0 + POISSON) * (1.0 - 2.0 * POISSON));
+    let c = ((lambda + 2.0 * mu) / DENSITY).sqrt();
+    let v0 = 0.01 * c;
+    let dt = CFL * h / (c + 1.5 * (D as f64).sqrt() * v0);
+
+    let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [n; D], h).map_err(e)?;
+    sim.set_shape(shape).map_err(e)?;
+    sim.set_transfer(transfer).map_err(e)?;
+    if a.vc {
+        sim.set_integration(Integration::Vc { order: vc_order })
+            .map_err(e)?;
+    }
+    let mat = sim.add_material(Material::neo_hookean(DENSITY, YOUNG, POISSON).map_err(e)?);
+    let total = m.pow(D as u32);
+    let mut x = Vec::with_capacity(total);
+    let mut v = Vec::with_capacity(total);
+    let half = b as f64 * h / 2.0;
+    for lin in 0..total {
+        // x fastest, then y, then z (the peers use the same order).
+        let mut p = Vector::<D>::zeros();
+        let mut r = lin;
+        for a in 0..D {
+            let i = r % m;
+            r /= m;
+            p[a] = (g as f64 + (i as f64 + 0.5) / 2.0) * h;
+        }
+        let xi = p.map(|c| (c - 0.5) / half);
+        let mut vel = Vector::<D>::zeros();
+        for a in 0..D {
+            vel[a] = v0 * ((std::f64::consts::PI * xi[(a + 1) % D]).sin() - 0.5 * xi[a]);
+        }
+        x.push(p);
+        v.push(vel);
+    }
+    let vol = vec![(h / 2.0).powi(D as i32); total];
+    sim.add_particles(mat, &x, &vol, Some(&v)).map_err(e)?;
+    drop((x, v, vol));
+    for _ in 0..a.warmup {
+        sim.step(dt).map_err(e)?;
+    }
+    let setup_seconds = setup.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let mut steps = 0;
+    let mut seconds = 0.0;
+    while steps < a.steps {
+        if let Err(err) = sim.step(dt) {
+            // A rejected step (e.g. an inverted particle) ends the measurement: report the steps
+            // taken before it, if there are enough of them, and say so on stderr.
+            if steps < a.min_steps.max(1) {
+                return Err(err.to_string());
+            }
+            eprintln!("throughput: stopped after {steps} timed steps: {err}");
+            break;
+        }
+        steps += 1;
+        seconds = start.elapsed().as_secs_f64();
+        if let Some(t) = a.max_seconds {
+            if steps >= a.min_steps && seconds > t {
+                break;
+            }
+        }
+    }
+
+    let ps = sim.particles();
+    let ke: f64 = ps
+        .mass
+        .iter()
+        .zip(&ps.velocity)
+        .map(|(m, v)| 0.5 * m * v.norm_squared())
+        .sum();
+    let transfer_name = match transfer {
+        Transfer::Apic => "apic",
+        Transfer::PicFlip { .. } => "pic",
+    };
+    if a.header {
+        println!("{HEADER}");
+    }
+    println!(
+        "rkmpm,{D},{},{},{transfer_name},{total},{n},{},{steps},{dt:.6e},{seconds:.6},{:.6e},{ke:.12e},{setup_seconds:.3}",
+        a.method,
+        if a.vc { "vc" } else { "mp" },
+        rayon::current_num_threads(),
+        (total * steps) as f64 / seconds,
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let result = parse().and_then(|a| match a.dim {
+        2 => run::<2>(&a),
+        _ => run::<3>(&a),
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("throughput: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
