@@ -163,6 +163,11 @@ impl<const D: usize> Walls<D> {
                         nodes.force[m] += f;
                         nodes.mass[n] = 0.0;
                         nodes.force[n] = Vector::zeros();
+                        if !nodes.body_force.is_empty() {
+                            let b = wall.reflect(axis, &nodes.body_force[n]);
+                            nodes.body_force[m] += b;
+                            nodes.body_force[n] = Vector::zeros();
+                        }
                     }
                     if let Some(l) = nodes.lumping.as_mut() {
                         let p = wall.reflect(axis, &l.momentum[n]);
@@ -184,6 +189,9 @@ impl<const D: usize> Walls<D> {
                         if wall.sign(axis, c) < 0.0 {
                             nodes.momentum[n][c] = 0.0;
                             nodes.force[n][c] = 0.0;
+                            if !nodes.body_force.is_empty() {
+                                nodes.body_force[n][c] = 0.0;
+                            }
                             if let Some(l) = nodes.lumping.as_mut() {
                                 l.momentum[n][c] = 0.0;
                                 l.body_force[n][c] = 0.0;

@@ -148,6 +148,11 @@ pub struct GridNodes<const D: usize> {
     pub lumping: Option<LumpingShift<D>>,
     /// Mass gradient `Σ_p m_p ∇Ψ_I(x_p)` for contact normals; empty unless contact is on.
     pub mass_gradient: Vec<Vector<D>>,
+    /// Body force `Σ_p m_p Ψ_I b_p` kept apart from `force` (which then holds the internal force
+    /// and tractions), so that the grid update can limit the internal force of edge nodes and
+    /// still apply the body force exactly; empty unless that limit is on for a shape without
+    /// lumping (VC integration).
+    pub body_force: Vec<Vector<D>>,
     touched: Vec<bool>,
     /// Position of each touched node in `active` (valid only for touched nodes).
     slot: Vec<u32>,
@@ -161,17 +166,27 @@ impl<const D: usize> GridNodes<D> {
     /// when the storage already fits; otherwise all fields start at zero with nothing active.
     /// All or nothing: when the storage cannot be allocated (`OutOfMemory`), the nodes are left
     /// as they were.
-    pub fn ensure(&mut self, grid: &Grid<D>, lumping: bool, mass_gradient: bool) -> Result<()> {
+    pub fn ensure(
+        &mut self,
+        grid: &Grid<D>,
+        lumping: bool,
+        mass_gradient: bool,
+        body_force: bool,
+    ) -> Result<()> {
         let n = grid.node_count();
         if self.mass.len() == n
             && self.lumping.is_some() == lumping
             && (self.mass_gradient.len() == n) == mass_gradient
+            && (self.body_force.len() == n) == body_force
         {
             return Ok(());
         }
         let fail = |e: std::collections::TryReserveError| {
             let per_node = std::mem::size_of::<f64>()
-                * (1 + 4 * D + usize::from(mass_gradient) * D + usize::from(lumping) * (2 + 3 * D))
+                * (1 + 4 * D
+                    + usize::from(mass_gradient) * D
+                    + usize::from(body_force) * D
+                    + usize::from(lumping) * (2 + 3 * D))
                 + 5;
             Error::new(
                 ErrorKind::OutOfMemory,
@@ -193,6 +208,10 @@ impl<const D: usize> GridNodes<D> {
                 false => None,
             },
             mass_gradient: match mass_gradient {
+                true => filled(n, Vector::zeros()).map_err(fail)?,
+                false => Vec::new(),
+            },
+            body_force: match body_force {
                 true => filled(n, Vector::zeros()).map_err(fail)?,
                 false => Vec::new(),
             },
@@ -239,6 +258,9 @@ impl<const D: usize> GridNodes<D> {
             self.touched[n] = false;
             if !self.mass_gradient.is_empty() {
                 self.mass_gradient[n] = Vector::zeros();
+            }
+            if !self.body_force.is_empty() {
+                self.body_force[n] = Vector::zeros();
             }
             if let Some(l) = self.lumping.as_mut() {
                 l.mass[n] = 0.0;

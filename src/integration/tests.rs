@@ -48,7 +48,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
     let grid = sim.grid.clone();
     let ps = sim.particles.clone();
     let work = &mut sim.work;
-    work.nodes.ensure(&grid, false, false).unwrap();
+    work.nodes.ensure(&grid, false, false, false).unwrap();
     work.stencils
         .compute(sim.shape.as_ref(), &grid, &ps.position);
     work.boundary_stencils

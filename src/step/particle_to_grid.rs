@@ -91,7 +91,11 @@ pub fn particle_to_grid<const D: usize>(
                 }
                 nodes.force[n] += vs * grad;
                 if nodes.lumping.is_none() {
-                    nodes.force[n] += (m * w) * b;
+                    if nodes.body_force.is_empty() {
+                        nodes.force[n] += (m * w) * b;
+                    } else {
+                        nodes.body_force[n] += (m * w) * b;
+                    }
                 }
             }
         }
