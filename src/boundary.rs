@@ -177,11 +177,8 @@ impl<const D: usize> Walls<D> {
                             l.mass[m] += l.mass[n];
                             let f = wall.reflect(axis, &l.body_force[n]);
                             l.body_force[m] += f;
-                            let f = wall.reflect(axis, &l.body_force_shape[n]);
-                            l.body_force_shape[m] += f;
                             l.mass[n] = 0.0;
                             l.body_force[n] = Vector::zeros();
-                            l.body_force_shape[n] = Vector::zeros();
                         }
                     }
                 } else if d == 0 {
@@ -195,7 +192,6 @@ impl<const D: usize> Walls<D> {
                             if let Some(l) = nodes.lumping.as_mut() {
                                 l.momentum[n][c] = 0.0;
                                 l.body_force[n][c] = 0.0;
-                                l.body_force_shape[n][c] = 0.0;
                             }
                         }
                     }

@@ -150,8 +150,8 @@ pub struct GridNodes<const D: usize> {
     pub mass_gradient: Vec<Vector<D>>,
     /// Body force `Σ_p m_p Ψ_I b_p` kept apart from `force` (which then holds the internal force
     /// and tractions), so that the grid update can limit the internal force of edge nodes and
-    /// still apply the body force exactly; empty unless that limit is on for a shape without
-    /// lumping (VC integration).
+    /// still apply the body force exactly; empty unless that limit is on (signed shape functions
+    /// and VC integration).
     pub body_force: Vec<Vector<D>>,
     touched: Vec<bool>,
     /// Position of each touched node in `active` (valid only for touched nodes).
@@ -186,7 +186,7 @@ impl<const D: usize> GridNodes<D> {
                 * (1 + 4 * D
                     + usize::from(mass_gradient) * D
                     + usize::from(body_force) * D
-                    + usize::from(lumping) * (2 + 3 * D))
+                    + usize::from(lumping) * (2 + 2 * D))
                 + 5;
             Error::new(
                 ErrorKind::OutOfMemory,
@@ -266,7 +266,6 @@ impl<const D: usize> GridNodes<D> {
                 l.mass[n] = 0.0;
                 l.momentum[n] = Vector::zeros();
                 l.body_force[n] = Vector::zeros();
-                l.body_force_shape[n] = Vector::zeros();
                 l.blend[n] = 1.0;
             }
         }
@@ -283,15 +282,13 @@ impl<const D: usize> GridNodes<D> {
     }
 }
 
-/// Per-node `Σ_p m_p (L_I − Ψ_I)` times 1, the mapped velocity and the body acceleration, and the
-/// body force `Σ_p m_p Ψ_I b_p` itself (kept apart from the internal force, which alone is
-/// limited at edge nodes).
+/// Per-node `Σ_p m_p (L_I − Ψ_I)` times 1, the mapped velocity and the body acceleration (the
+/// body force `Σ_p m_p Ψ_I b_p` itself is `GridNodes::body_force`).
 #[derive(Debug, Default, Clone)]
 pub struct LumpingShift<const D: usize> {
     pub mass: Vec<f64>,
     pub momentum: Vec<Vector<D>>,
     pub body_force: Vec<Vector<D>>,
-    pub body_force_shape: Vec<Vector<D>>,
     /// `θ` of each node, set by the first grid update of a step and reused by the second map of
     /// MUSL.
     pub blend: Vec<f64>,
@@ -303,7 +300,6 @@ impl<const D: usize> LumpingShift<D> {
             mass: filled(n, 0.0)?,
             momentum: filled(n, Vector::zeros())?,
             body_force: filled(n, Vector::zeros())?,
-            body_force_shape: filled(n, Vector::zeros())?,
             blend: filled(n, 1.0)?,
         })
     }

@@ -303,6 +303,9 @@ impl<const D: usize> Sim<D> {
                 "positions, volumes and velocities differ in length",
             ));
         }
+        let domain: f64 = (0..D)
+            .map(|a| self.grid.cells[a] as f64 * self.grid.cell_size)
+            .product();
         for (p, x) in positions.iter().enumerate() {
             if x.iter().any(|c| !c.is_finite()) {
                 return Err(Error::invalid(format!(
@@ -321,9 +324,6 @@ impl<const D: usize> Sim<D> {
                 ));
             }
             check_positive(&format!("volume of particle {p}"), volumes[p])?;
-            let domain: f64 = (0..D)
-                .map(|a| self.grid.cells[a] as f64 * self.grid.cell_size)
-                .product();
             if volumes[p] > domain {
                 return Err(Error::invalid(format!(
                     "volume of particle {p} ({:e}) exceeds the volume of the whole domain ({domain:e})",

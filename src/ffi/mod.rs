@@ -141,10 +141,9 @@ enum AnySim {
 pub struct RkmpmSim {
     sim: AnySim,
     series: Vec<VtkSeries>,
-    progress: Option<(
-        unsafe extern "C" fn(*mut c_void, u64, f64, f64, f64) -> i32,
-        *mut c_void,
-    )>,
+    /// The progress callback of `rkmpm_sim_advance` and its user data.
+    progress: RkmpmProgressFn,
+    progress_data: *mut c_void,
 }
 
 macro_rules! with_sim {
@@ -280,6 +279,7 @@ pub unsafe extern "C" fn rkmpm_sim_new(
             sim,
             series: Vec::new(),
             progress: None,
+            progress_data: std::ptr::null_mut(),
         })));
         Ok(())
     })
@@ -328,6 +328,7 @@ pub unsafe extern "C" fn rkmpm_sim_load(
             sim,
             series: Vec::new(),
             progress: None,
+            progress_data: std::ptr::null_mut(),
         })));
         Ok(())
     })
@@ -627,7 +628,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_progress(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_progress", || {
         let s = sim_mut(sim)?;
-        s.progress = f.map(|f| (f, user_data));
+        s.progress = f;
+        s.progress_data = user_data;
         Ok(())
     })
 }
@@ -961,10 +963,10 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
             check_ptr("out_steps", out_steps)?;
         }
         let before = with_sim!(&s.sim, m => m.steps());
-        let progress = s.progress;
+        let (progress, user) = (s.progress, s.progress_data);
         let mut observe = |p: crate::step::Progress| match progress {
             // SAFETY: the caller promised the callback stays callable with its user data.
-            Some((f, user)) => unsafe { f(user, p.steps, p.time, p.end, p.dt) == 0 },
+            Some(f) => unsafe { f(user, p.steps, p.time, p.end, p.dt) == 0 },
             None => true,
         };
         let result = with_sim!(&mut s.sim, m => m.advance_observed(duration, cfl, &mut observe));

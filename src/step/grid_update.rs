@@ -36,8 +36,8 @@ pub fn grid_update<const D: usize>(
     // Signed shape functions: nodes at the edge of a body have a tiny mass but not a tiny
     // (VC-corrected) force; their acceleration is taken against at least a fraction of the
     // largest node mass (see [`EDGE_MASS_FRACTION`]).
-    let limited = nodes.lumping.is_some() || !nodes.body_force.is_empty();
-    let force_mass_floor = match (limited, dt) {
+    // The limit is on exactly when the body force is kept apart (signed shapes and VC).
+    let force_mass_floor = match (!nodes.body_force.is_empty(), dt) {
         (true, Some(_)) => {
             EDGE_MASS_FRACTION
                 * nodes
@@ -60,7 +60,7 @@ pub fn grid_update<const D: usize>(
             nodes.momentum[n] += rest * l.momentum[n];
             if dt.is_some() {
                 nodes.mass[n] += rest * l.mass[n];
-                body = l.body_force_shape[n] + rest * l.body_force[n];
+                body = nodes.body_force[n] + rest * l.body_force[n];
             }
         } else if dt.is_some() && !nodes.body_force.is_empty() {
             body = nodes.body_force[n];

@@ -205,10 +205,10 @@ impl<const D: usize> Sim<D> {
         let ps = &self.particles;
         let work = &mut self.work;
         let signed = self.shape.is_signed();
-        // VC runs keep the body force apart so that edge nodes' internal force can be limited
-        // (grid_update); signed shapes keep it apart in their lumping shift already.
+        // Signed shapes and VC keep the body force apart so that edge nodes' internal force can
+        // be limited (grid_update).
         work.nodes
-            .ensure(grid, signed, false, self.vc.is_some() && !signed)?;
+            .ensure(grid, signed, false, signed || self.vc.is_some())?;
         let contact = self.options.contact;
         let rigid: Vec<Option<Vector<D>>> =
             self.materials.iter().map(|m| m.rigid_velocity()).collect();
@@ -216,7 +216,7 @@ impl<const D: usize> Sim<D> {
             work.bodies
                 .resize_with(self.materials.len(), GridNodes::default);
             for b in work.bodies.iter_mut() {
-                b.ensure(grid, signed, true, false)?;
+                b.ensure(grid, signed, true, signed)?;
             }
         }
 

@@ -77,7 +77,6 @@ pub fn particle_to_grid<const D: usize>(
                 if let Some((_, b)) = force {
                     l.mass[n] += m * shift;
                     l.body_force[n] += (m * shift) * b;
-                    l.body_force_shape[n] += (m * w) * b;
                 }
             }
             if let Some((vs, b)) = force {
@@ -90,12 +89,10 @@ pub fn particle_to_grid<const D: usize>(
                     nodes.mass_gradient[n] += m * gs[s];
                 }
                 nodes.force[n] += vs * grad;
-                if nodes.lumping.is_none() {
-                    if nodes.body_force.is_empty() {
-                        nodes.force[n] += (m * w) * b;
-                    } else {
-                        nodes.body_force[n] += (m * w) * b;
-                    }
+                if nodes.body_force.is_empty() {
+                    nodes.force[n] += (m * w) * b;
+                } else {
+                    nodes.body_force[n] += (m * w) * b;
                 }
             }
         }
