@@ -80,6 +80,16 @@ impl<const D: usize> Grid<D> {
         self.ghost
     }
 
+    /// Stored nodes per axis, ghost layers included.
+    pub fn dims(&self) -> [usize; D] {
+        self.dims
+    }
+
+    /// Storage index step per axis.
+    pub fn strides(&self) -> [usize; D] {
+        self.strides
+    }
+
     /// Total number of stored nodes, ghost layers included.
     pub fn node_count(&self) -> usize {
         self.dims.iter().product()
@@ -240,6 +250,19 @@ impl<const D: usize> GridNodes<D> {
         self.slot[n] as usize
     }
 
+    /// Lists node `n` in `active` if a parallel scatter ([`NodeScatter`]) marked it touched and it
+    /// is not listed yet (`slot` and `active` point at each other exactly for listed nodes).
+    #[inline]
+    pub fn collect_touched(&mut self, n: usize) {
+        if self.touched[n] {
+            let s = self.slot[n] as usize;
+            if s >= self.active.len() || self.active[s] != n {
+                self.slot[n] = self.active.len() as u32;
+                self.active.push(n);
+            }
+        }
+    }
+
     /// Position of touched node `n` in `active`.
     #[inline]
     pub fn slot(&self, n: usize) -> usize {
@@ -280,6 +303,87 @@ impl<const D: usize> GridNodes<D> {
             && self.force.iter().all(|f| f.norm_squared() == 0.0)
             && !self.touched.iter().any(|&t| t)
     }
+}
+
+/// Write access to the node fields of a [`GridNodes`] from several threads at once, for the
+/// coloured particle-to-grid map (`step::bins`): the caller guarantees that no two threads write
+/// the same node. Nodes written are marked touched; [`GridNodes::collect_touched`] lists them
+/// afterwards. The slots of nodes listed before the scatter (by VC) stay readable.
+pub struct NodeScatter<'a, const D: usize> {
+    pub mass: *mut f64,
+    pub momentum: *mut Vector<D>,
+    pub force: *mut Vector<D>,
+    /// Null when the field is not kept.
+    pub mass_gradient: *mut Vector<D>,
+    /// Null when the field is not kept.
+    pub body_force: *mut Vector<D>,
+    /// Lumping shift: mass, momentum, body force (null without a lumping shift).
+    pub lumping: (*mut f64, *mut Vector<D>, *mut Vector<D>),
+    touched: *mut bool,
+    /// Slots of the nodes listed before the scatter.
+    pub slot: &'a [u32],
+    len: usize,
+}
+
+// SAFETY: the pointers address the node storage of one `GridNodes`, borrowed mutably for the
+// scatter's lifetime; the callers write disjoint nodes from different threads (colours).
+unsafe impl<const D: usize> Sync for NodeScatter<'_, D> {}
+unsafe impl<const D: usize> Send for NodeScatter<'_, D> {}
+
+impl<'a, const D: usize> NodeScatter<'a, D> {
+    /// Access to all fields of `nodes` (which stays mutably borrowed while this lives).
+    pub fn new(nodes: &'a mut GridNodes<D>) -> Self {
+        let opt = |v: &mut Vec<Vector<D>>| {
+            if v.is_empty() {
+                std::ptr::null_mut()
+            } else {
+                v.as_mut_ptr()
+            }
+        };
+        let lumping = match nodes.lumping.as_mut() {
+            Some(l) => (
+                l.mass.as_mut_ptr(),
+                l.momentum.as_mut_ptr(),
+                l.body_force.as_mut_ptr(),
+            ),
+            None => (
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+                std::ptr::null_mut(),
+            ),
+        };
+        NodeScatter {
+            mass: nodes.mass.as_mut_ptr(),
+            momentum: nodes.momentum.as_mut_ptr(),
+            force: nodes.force.as_mut_ptr(),
+            mass_gradient: opt(&mut nodes.mass_gradient),
+            body_force: opt(&mut nodes.body_force),
+            lumping,
+            touched: nodes.touched.as_mut_ptr(),
+            slot: &nodes.slot,
+            len: nodes.mass.len(),
+        }
+    }
+
+    /// Marks node `n` touched.
+    ///
+    /// # Safety
+    /// No other thread writes node `n` during the scatter.
+    #[inline(always)]
+    pub unsafe fn touch(&self, n: usize) {
+        assert!(n < self.len);
+        *self.touched.add(n) = true;
+    }
+}
+
+/// `*field[n] += value` for a field pointer of a [`NodeScatter`].
+///
+/// # Safety
+/// `field` is one of the scatter's non-null pointers, `n` was checked by [`NodeScatter::touch`]
+/// and no other thread writes node `n` during the scatter.
+#[inline(always)]
+pub unsafe fn scatter_add<T: std::ops::AddAssign>(field: *mut T, n: usize, value: T) {
+    *field.add(n) += value;
 }
 
 /// Per-node `Σ_p m_p (L_I − Ψ_I)` times 1, the mapped velocity and the body acceleration (the

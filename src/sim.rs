@@ -146,6 +146,18 @@ impl<const D: usize> Sim<D> {
         }
     }
 
+    /// Wall-clock seconds spent in each phase of the steps so far (benchmarks, tuning).
+    pub fn phase_times(&self) -> crate::step::PhaseTimes {
+        self.work.times
+    }
+
+    /// Stores the stencils of B-splines node by node, as RK's, instead of as 1D factors (the
+    /// results are the same bits; benchmarks and tests compare the two).
+    #[doc(hidden)]
+    pub fn set_stored_stencils(&mut self, stored: bool) {
+        self.work.stored_stencils = stored;
+    }
+
     /// Chooses the shape function. Before stepping only.
     pub fn set_shape(&mut self, shape: Shape) -> Result<()> {
         self.before_stepping("the shape function")?;

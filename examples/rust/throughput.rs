@@ -13,7 +13,8 @@
 //! order 1, order 2 for rk2), `--particles N` (rounded to m^D with m even), `--steps S` (timed
 //! steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
-//! `--header` (print the CSV header first). A step the engine rejects (an inverted particle, say)
+//! `--header` (print the CSV header first), `--phases` (time per phase on stderr),
+//! `--stored-stencils` (B-spline stencils stored node by node, as before the 1D factors). A step the engine rejects (an inverted particle, say)
 //! ends the timing: the line reports the steps before it (at least `--min-steps`) and the error
 //! goes to stderr.
 //!
@@ -54,6 +55,8 @@ struct Args {
     max_seconds: Option<f64>,
     min_steps: usize,
     header: bool,
+    phases: bool,
+    stored: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -67,6 +70,8 @@ fn parse() -> Result<Args, String> {
         max_seconds: None,
         min_steps: 5,
         header: false,
+        phases: false,
+        stored: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -87,11 +92,13 @@ fn parse() -> Result<Args, String> {
                 a.min_steps = val()?.parse().map_err(|e| format!("--min-steps: {e}"))?
             }
             "--header" => a.header = true,
+            "--phases" => a.phases = true,
+            "--stored-stencils" => a.stored = true,
             "-h" | "--help" => {
                 return Err(
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
-                     [--min-steps K] [--header]"
+                     [--min-steps K] [--header] [--phases] [--stored-stencils]"
                         .into(),
                 )
             }
@@ -177,11 +184,13 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     }
     let vol = vec![(h / 2.0).powi(D as i32); total];
     sim.add_particles(mat, &x, &vol, Some(&v)).map_err(e)?;
+    sim.set_stored_stencils(a.stored);
     drop((x, v, vol));
     for _ in 0..a.warmup {
         sim.step(dt).map_err(e)?;
     }
     let setup_seconds = setup.elapsed().as_secs_f64();
+    let before = sim.phase_times();
 
     let start = Instant::now();
     let mut steps = 0;
@@ -205,6 +214,20 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         }
     }
 
+    if a.phases {
+        // Time per phase of the timed steps, in ns per particle-step and as a share.
+        let after = sim.phase_times();
+        let work = (total * steps) as f64;
+        let (b, t) = (before.phases(), after.phases());
+        let sum: f64 = t.iter().zip(&b).map(|(t, b)| t.1 - b.1).sum();
+        for ((name, t), (_, b)) in t.iter().zip(&b) {
+            eprintln!(
+                "phase {name:>12}: {:8.2} ns/particle-step {:5.1} %",
+                (t - b) * 1e9 / work,
+                100.0 * (t - b) / sum
+            );
+        }
+    }
     let ps = sim.particles();
     let ke: f64 = ps
         .mass

@@ -216,8 +216,20 @@ impl<const D: usize> VcCorrection<D> {
         n: usize,
         x: &Vector<D>,
     ) -> Vector<D> {
+        self.gradient_correction_at(grid, nodes.slot(n) as u32, n, x)
+    }
+
+    /// [`VcCorrection::gradient_correction`] for the node `n` listed at `slot`.
+    #[inline]
+    pub fn gradient_correction_at(
+        &self,
+        grid: &Grid<D>,
+        slot: u32,
+        n: usize,
+        x: &Vector<D>,
+    ) -> Vector<D> {
         let m = self.m();
-        let slot = nodes.slot(n);
+        let slot = slot as usize;
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
         if m == 1 {
             return Vector::<D>::from_fn(|k, _| r[k]);

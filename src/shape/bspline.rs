@@ -14,7 +14,7 @@ pub enum BSplineOrder {
 
 impl BSplineOrder {
     /// Nodes per axis in the stencil.
-    fn width(self) -> usize {
+    pub fn width(self) -> usize {
         match self {
             BSplineOrder::Linear => 2,
             BSplineOrder::Quadratic => 3,
@@ -72,6 +72,46 @@ impl BSplineOrder {
     }
 }
 
+/// The 1D factors of a tensor-product B-spline at one point: the stencil's first node and, per
+/// axis, the values and derivatives (per length) at its `width ≤ 4` nodes. `Ψ` and `∇Ψ` at stencil
+/// node `first + k` are products of them ([`Factors::at`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Factors<const D: usize> {
+    pub first: [i64; D],
+    pub values: [[f64; 4]; D],
+    pub derivatives: [[f64; 4]; D],
+}
+
+impl<const D: usize> Factors<D> {
+    /// `(Ψ, ∇Ψ)` at the stencil node `first + k`, multiplied in axis order (so that every path
+    /// that uses the factors gives the same bits).
+    #[inline(always)]
+    pub fn at(&self, k: &[usize; D]) -> (f64, Vector<D>) {
+        tensor_product(&self.values, &self.derivatives, k)
+    }
+}
+
+/// `(Π_a w_a[k_a], (Π_b (b = a ? dw_b : w_b)[k_b])_a)`, multiplied in axis order.
+#[inline(always)]
+pub(crate) fn tensor_product<const D: usize, const W: usize>(
+    w: &[[f64; W]; D],
+    dw: &[[f64; W]; D],
+    k: &[usize; D],
+) -> (f64, Vector<D>) {
+    let mut value = 1.0;
+    for a in 0..D {
+        value *= w[a][k[a]];
+    }
+    let grad = Vector::<D>::from_fn(|a, _| {
+        let mut g = 1.0;
+        for b in 0..D {
+            g *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+        }
+        g
+    });
+    (value, grad)
+}
+
 /// A tensor-product B-spline shape function of the given order.
 #[derive(Debug, Clone, Copy)]
 pub struct BSpline {
@@ -81,6 +121,37 @@ pub struct BSpline {
 impl BSpline {
     pub fn new(order: BSplineOrder) -> Self {
         BSpline { order }
+    }
+}
+
+impl BSpline {
+    /// The 1D factors of the stencil of `x` (inside the domain of `grid`).
+    #[inline]
+    pub fn factors<const D: usize>(&self, grid: &Grid<D>, x: &Vector<D>) -> Factors<D> {
+        let width = self.order.width();
+        let xi = grid.to_cell_units(x);
+        let inv_h = 1.0 / grid.cell_size;
+        let mut f = Factors {
+            first: [0; D],
+            values: [[0.0; 4]; D],
+            derivatives: [[0.0; 4]; D],
+        };
+        for a in 0..D {
+            f.first[a] = self.order.first_node(xi[a]);
+            if self.order == BSplineOrder::Linear {
+                // The two nodes of the cell, with the cell's one-sided gradient also on a node.
+                let r = xi[a] - f.first[a] as f64;
+                f.values[a][..2].copy_from_slice(&[1.0 - r, r]);
+                f.derivatives[a][..2].copy_from_slice(&[-inv_h, inv_h]);
+                continue;
+            }
+            for k in 0..width {
+                let (v, dv) = self.order.kernel(xi[a] - (f.first[a] + k as i64) as f64);
+                f.values[a][k] = v;
+                f.derivatives[a][k] = dv * inv_h;
+            }
+        }
+        f
     }
 }
 
@@ -109,6 +180,14 @@ impl<const D: usize> ShapeFunction<D> for BSpline {
         1
     }
 
+    fn stencil_width(&self) -> usize {
+        self.order.width()
+    }
+
+    fn stencil_origin(&self, xi: &Vector<D>) -> [i64; D] {
+        std::array::from_fn(|a| self.order.first_node(xi[a]))
+    }
+
     fn evaluate(
         &self,
         grid: &Grid<D>,
@@ -118,44 +197,11 @@ impl<const D: usize> ShapeFunction<D> for BSpline {
         gradients: &mut [Vector<D>],
     ) {
         let width = self.order.width();
-        let xi = grid.to_cell_units(x);
-        let inv_h = 1.0 / grid.cell_size;
-        // 1D values and derivatives per axis (width ≤ 4).
-        let mut first = [0i64; D];
-        let mut w = [[0.0f64; 4]; D];
-        let mut dw = [[0.0f64; 4]; D];
-        for a in 0..D {
-            first[a] = self.order.first_node(xi[a]);
-            if self.order == BSplineOrder::Linear {
-                // The two nodes of the cell, with the cell's one-sided gradient also on a node.
-                let r = xi[a] - first[a] as f64;
-                w[a][..2].copy_from_slice(&[1.0 - r, r]);
-                dw[a][..2].copy_from_slice(&[-inv_h, inv_h]);
-                continue;
-            }
-            for k in 0..width {
-                let (v, dv) = self.order.kernel(xi[a] - (first[a] + k as i64) as f64);
-                w[a][k] = v;
-                dw[a][k] = dv * inv_h;
-            }
-        }
-        // Tensor product over the stencil, axis 0 fastest.
+        let f = self.factors(grid, x);
         let mut k = [0usize; D];
         for s in 0..nodes.len() {
-            let mut idx = [0i64; D];
-            let mut value = 1.0;
-            for a in 0..D {
-                idx[a] = first[a] + k[a] as i64;
-                value *= w[a][k[a]];
-            }
-            let grad = Vector::<D>::from_fn(|a, _| {
-                (0..D)
-                    .map(|b| if a == b { dw[b][k[b]] } else { w[b][k[b]] })
-                    .product()
-            });
-            nodes[s] = grid.node_index(idx);
-            values[s] = value;
-            gradients[s] = grad;
+            nodes[s] = grid.node_index(std::array::from_fn(|a| f.first[a] + k[a] as i64));
+            (values[s], gradients[s]) = f.at(&k);
             for kk in k.iter_mut() {
                 *kk += 1;
                 if *kk < width {

@@ -8,15 +8,16 @@
 mod bspline;
 mod monomials;
 mod rk;
+mod stencil;
 
 pub use bspline::{BSpline, BSplineOrder};
 pub use monomials::Monomials;
 pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
+pub use stencil::{StencilNode, StencilView, Stencils, TensorStencils};
 
 use crate::error::Result;
 use crate::grid::Grid;
 use crate::Vector;
-use rayon::prelude::*;
 
 /// The shape function a simulation uses, as the user chooses it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,6 +52,12 @@ impl Shape {
 pub trait ShapeFunction<const D: usize>: Send + Sync {
     /// Number of nodes in every particle's stencil (entries may have zero weight).
     fn stencil_len(&self) -> usize;
+    /// Nodes per axis of the box that holds every stencil: the nodes with nonzero value or
+    /// gradient at `x` have integer indices in `origin_a ..= origin_a + width − 1`, with `origin`
+    /// from [`ShapeFunction::stencil_origin`]. The coloured particle-to-grid map relies on it.
+    fn stencil_width(&self) -> usize;
+    /// Lowest integer node index per axis of the stencil box of a point at `xi` (cell units).
+    fn stencil_origin(&self, xi: &Vector<D>) -> [i64; D];
     /// Ghost node layers needed around the domain so that the stencil of any point inside the
     /// domain lies on the grid.
     fn ghost_layers(&self) -> usize;
@@ -82,62 +89,6 @@ pub trait ShapeFunction<const D: usize>: Send + Sync {
         values: &mut [f64],
         gradients: &mut [Vector<D>],
     );
-}
-
-/// Shape-function values and gradients of every particle, computed once per step.
-#[derive(Debug, Default, Clone)]
-pub struct Stencils<const D: usize> {
-    pub len: usize,
-    pub nodes: Vec<usize>,
-    pub values: Vec<f64>,
-    pub gradients: Vec<Vector<D>>,
-    /// Nonnegative lumping weights (same layout as `values`), only for signed shape functions;
-    /// empty otherwise.
-    pub lumping: Vec<f64>,
-}
-
-impl<const D: usize> Stencils<D> {
-    /// Evaluates `shape` at every position (in parallel; each particle is independent).
-    pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
-        let len = shape.stencil_len();
-        self.len = len;
-        let total = len * x.len();
-        self.nodes.resize(total, 0);
-        self.values.resize(total, 0.0);
-        self.gradients.resize(total, Vector::zeros());
-        self.nodes
-            .par_chunks_mut(len)
-            .zip(self.values.par_chunks_mut(len))
-            .zip(self.gradients.par_chunks_mut(len))
-            .zip(x.par_iter())
-            .for_each(|(((n, w), g), xp)| shape.evaluate(grid, xp, n, w, g));
-        if shape.is_signed() {
-            self.lumping.resize(total, 0.0);
-            self.lumping
-                .par_chunks_mut(len)
-                .zip(x.par_iter())
-                .for_each(|(l, xp)| shape.lumping_weights(grid, xp, l));
-        } else {
-            self.lumping.clear();
-        }
-    }
-
-    /// The lumping weights of particle `p`, when the shape function is signed.
-    #[inline]
-    pub fn lumping_of(&self, p: usize) -> Option<&[f64]> {
-        (!self.lumping.is_empty()).then(|| &self.lumping[p * self.len..(p + 1) * self.len])
-    }
-
-    /// The stencil of particle `p`: node indices, values, gradients.
-    #[inline]
-    pub fn of(&self, p: usize) -> (&[usize], &[f64], &[Vector<D>]) {
-        let r = p * self.len..(p + 1) * self.len;
-        (
-            &self.nodes[r.clone()],
-            &self.values[r.clone()],
-            &self.gradients[r],
-        )
-    }
 }
 
 #[cfg(test)]

@@ -215,6 +215,14 @@ impl<const D: usize> ShapeFunction<D> for ReproducingKernel<D> {
         self.width.pow(D as u32)
     }
 
+    fn stencil_width(&self) -> usize {
+        self.width
+    }
+
+    fn stencil_origin(&self, xi: &Vector<D>) -> [i64; D] {
+        std::array::from_fn(|a| self.first_node(xi[a]))
+    }
+
     fn ghost_layers(&self) -> usize {
         self.support.ceil() as usize + 1
     }

@@ -271,3 +271,94 @@ fn rk_refuses_singular_supports() {
         assert!(Shape::Rk { order, support }.build::<3>().is_err());
     }
 }
+
+/// What a stencil visit calls: slot, node, `x_I − x_p`.
+type Visitor<'a, const D: usize> = dyn FnMut(usize, StencilNode<D>, Vector<D>) + 'a;
+
+/// Every stencil node with a nonzero value or gradient lies in the box of
+/// `ShapeFunction::stencil_origin` and `stencil_width` (the coloured particle-to-grid map writes
+/// only there), and the 1D factors of B-splines give the stored values bit for bit.
+fn check_stencil_box<const D: usize>(shape: Shape) {
+    let f = shape.build::<D>().unwrap();
+    let grid = grid_for::<D>(f.as_ref());
+    let mut rng = TestRng::new(17);
+    let len = f.stencil_len();
+    let (mut n, mut w, mut g) = (
+        vec![0; len],
+        vec![0.0; len],
+        vec![Vector::<D>::zeros(); len],
+    );
+    let pts = sample_points(&grid, &mut rng);
+    for x in &pts {
+        f.evaluate(&grid, x, &mut n, &mut w, &mut g);
+        let origin = f.stencil_origin(&grid.to_cell_units(x));
+        for s in 0..len {
+            if w[s] == 0.0 && g[s] == Vector::<D>::zeros() {
+                continue;
+            }
+            let i = grid.node_multi_index(n[s]);
+            for a in 0..D {
+                let k = i[a] - origin[a];
+                assert!(
+                    (0..f.stencil_width() as i64).contains(&k),
+                    "{shape:?}: node {i:?} outside the stencil box at {origin:?} (x = {x:?})"
+                );
+            }
+        }
+    }
+    let order = match shape {
+        Shape::Linear => BSplineOrder::Linear,
+        Shape::BSpline2 => BSplineOrder::Quadratic,
+        Shape::BSpline3 => BSplineOrder::Cubic,
+        Shape::Rk { .. } => return,
+    };
+    let mut stored = Stencils::<D>::default();
+    stored.compute(f.as_ref(), &grid, &pts);
+    let check = |view: &dyn Fn(usize, &mut Visitor<D>)| {
+        for (p, xp) in pts.iter().enumerate() {
+            let (ns, ws, gs) = stored.of(p);
+            let mut count = 0;
+            view(p, &mut |s, node, offset| {
+                assert_eq!(
+                    (node.node, node.value, node.gradient),
+                    (ns[s], ws[s], gs[s])
+                );
+                assert_eq!(offset, stored.offset(&grid, p, s, ns[s], xp));
+                count += 1;
+            });
+            assert_eq!(count, len);
+        }
+    };
+    macro_rules! tensor {
+        ($w:literal) => {{
+            let mut t = TensorStencils::<D, $w>::default();
+            t.compute(&BSpline::new(order), &grid, &pts);
+            check(&|p, f| {
+                t.for_each(p, |s, node| {
+                    f(s, node, t.offset(&grid, p, s, node.node, &pts[p]))
+                })
+            });
+        }};
+    }
+    match order {
+        BSplineOrder::Linear => tensor!(2),
+        BSplineOrder::Quadratic => tensor!(3),
+        BSplineOrder::Cubic => tensor!(4),
+    }
+}
+
+#[test]
+fn stencils_lie_in_their_box_and_factors_give_the_stored_bits() {
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let rk2 = Shape::Rk {
+        order: 2,
+        support: 3.0,
+    };
+    for shape in [Shape::Linear, Shape::BSpline2, Shape::BSpline3, rk1, rk2] {
+        check_stencil_box::<2>(shape);
+        check_stencil_box::<3>(shape);
+    }
+}

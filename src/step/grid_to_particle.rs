@@ -5,7 +5,7 @@ use crate::error::ErrorKind;
 use crate::grid::{Grid, GridNodes};
 use crate::material::PlasticState;
 use crate::particles::Particles;
-use crate::shape::Stencils;
+use crate::shape::{StencilNode, StencilView};
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
@@ -68,15 +68,14 @@ impl<const D: usize> ParticleUpdate<D> {
 /// `L_p = Σ_I v_I ⊗ ∇Ψ_I(x_p)` with the current node velocities.
 #[inline]
 pub fn velocity_gradient<const D: usize>(
-    stencils: &Stencils<D>,
+    stencils: &impl StencilView<D>,
     nodes: &GridNodes<D>,
     p: usize,
 ) -> Matrix<D> {
-    let (ns, _, gs) = stencils.of(p);
     let mut l = Matrix::<D>::zeros();
-    for s in 0..ns.len() {
-        l += nodes.velocity[ns[s]] * gs[s].transpose();
-    }
+    stencils.for_each(p, |_, s| {
+        l += nodes.velocity[s.node] * s.gradient.transpose()
+    });
     l
 }
 
@@ -106,7 +105,7 @@ impl<'a, const D: usize> Fields<'a, D> {
 pub fn grid_to_particle<const D: usize>(
     grid: &Grid<D>,
     ps: &Particles<D>,
-    stencils: &Stencils<D>,
+    stencils: &impl StencilView<D>,
     fields: Fields<'_, D>,
     rigid: &[Option<Vector<D>>],
     plan: TransferPlan,
@@ -126,23 +125,29 @@ pub fn grid_to_particle<const D: usize>(
             return;
         }
         let nodes = fields.of(p);
-        let (ns, ws, gs) = stencils.of(p);
         let mut v_pic = Vector::<D>::zeros();
         let mut dv = Vector::<D>::zeros();
         let mut b = Matrix::<D>::zeros();
         let mut l = Matrix::<D>::zeros();
-        for s in 0..ns.len() {
-            let (n, w) = (ns[s], ws[s]);
-            let vi = nodes.velocity[n];
-            v_pic += w * vi;
-            if flip {
-                dv += w * (vi - nodes.velocity_old[n]);
-            }
-            if plan.inverse_inertia.is_some() {
-                b += (w * vi) * (grid.node_position(grid.node_multi_index(n)) - xp).transpose();
-            }
-            l += vi * gs[s].transpose();
-        }
+        stencils.for_each(
+            p,
+            |s,
+             StencilNode {
+                 node: n,
+                 value: w,
+                 gradient: g,
+             }| {
+                let vi = nodes.velocity[n];
+                v_pic += w * vi;
+                if flip {
+                    dv += w * (vi - nodes.velocity_old[n]);
+                }
+                if plan.inverse_inertia.is_some() {
+                    b += (w * vi) * stencils.offset(grid, p, s, n, &xp).transpose();
+                }
+                l += vi * g.transpose();
+            },
+        );
         u.position = xp + dt * v_pic;
         u.velocity = if flip {
             (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)

@@ -11,12 +11,17 @@
 //! The new particle state is built in a workspace and committed only when every particle passed
 //! the checks (finite, `det F > 0`, inside the grid), so a failed step leaves the last good state.
 
+mod bins;
 mod grid_to_particle;
 mod grid_update;
 mod particle_to_grid;
+mod profile;
 mod timestep;
+use profile::lap;
+pub use profile::PhaseTimes;
 pub use timestep::Progress;
 
+pub use bins::Bins;
 pub use grid_to_particle::{grid_to_particle, velocity_gradient, Fields, ParticleUpdate};
 pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
@@ -25,7 +30,7 @@ use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
 use crate::integration::BoundaryPoints;
 use crate::material::{block, embed3, pressure, Constitutive};
-use crate::shape::Stencils;
+use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
 use nalgebra::Matrix3;
@@ -34,7 +39,18 @@ use rayon::prelude::*;
 /// Scratch space of a step, kept between steps so the hot loops do not allocate.
 #[derive(Debug, Default)]
 pub struct Workspace<const D: usize> {
+    /// Particles binned by grid block (the coloured particle-to-grid map).
+    pub bins: Bins<D>,
+    /// Stored stencils (RK, and every shape under VC).
     pub stencils: Stencils<D>,
+    /// B-spline stencils as 1D factors (linear hats, quadratic, cubic).
+    pub linear: TensorStencils<D, 2>,
+    pub quadratic: TensorStencils<D, 3>,
+    pub cubic: TensorStencils<D, 4>,
+    /// Use stored stencils for B-splines too (tests and benchmarks compare the two).
+    pub stored_stencils: bool,
+    /// Time per phase, summed over the steps.
+    pub times: PhaseTimes,
     pub boundary_stencils: Stencils<D>,
     /// Current particle volumes (for VC).
     pub volumes: Vec<f64>,
@@ -127,6 +143,7 @@ impl<const D: usize> Sim<D> {
             self.boundary.add(&x, &na, None)?;
         }
         let result = self.compute_step(dt);
+        let mut clock = std::time::Instant::now();
         self.work.nodes.reset();
         for b in self.work.bodies.iter_mut() {
             b.reset();
@@ -137,6 +154,7 @@ impl<const D: usize> Sim<D> {
         }
         let updates = result?;
         self.commit(updates);
+        self.work.times.commit += lap(&mut clock);
         self.time += dt;
         self.steps += 1;
         Ok(())
@@ -200,29 +218,87 @@ impl<const D: usize> Sim<D> {
 
     /// Runs the phases and returns the checked new particle state (in the workspace).
     fn compute_step(&mut self, dt: f64) -> Result<Vec<ParticleUpdate<D>>> {
-        let plan = self.transfer_plan();
         let grid = &self.grid;
-        let ps = &self.particles;
         let work = &mut self.work;
         let signed = self.shape.is_signed();
         // Signed shapes and VC keep the body force apart so that edge nodes' internal force can
         // be limited (grid_update).
         work.nodes
             .ensure(grid, signed, false, signed || self.vc.is_some())?;
-        let contact = self.options.contact;
-        let rigid: Vec<Option<Vector<D>>> =
-            self.materials.iter().map(|m| m.rigid_velocity()).collect();
-        if contact.is_some() {
+        if self.options.contact.is_some() {
             work.bodies
                 .resize_with(self.materials.len(), GridNodes::default);
             for b in work.bodies.iter_mut() {
                 b.ensure(grid, signed, true, signed)?;
             }
         }
+        let mut clock = std::time::Instant::now();
+        work.bins
+            .compute(self.shape.as_ref(), grid, &self.particles.position);
+        work.times.bins += lap(&mut clock);
 
-        // 1. Shape functions, once per particle.
-        work.stencils
-            .compute(self.shape.as_ref(), grid, &ps.position);
+        // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
+        //    stored lists.
+        let order = match self.options.shape {
+            Shape::Linear => Some(BSplineOrder::Linear),
+            Shape::BSpline2 => Some(BSplineOrder::Quadratic),
+            Shape::BSpline3 => Some(BSplineOrder::Cubic),
+            Shape::Rk { .. } => None,
+        }
+        .filter(|_| self.vc.is_none() && !work.stored_stencils);
+        match order {
+            Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
+            Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
+            Some(BSplineOrder::Cubic) => self.tensor_phases(dt, |w| &mut w.cubic),
+            None => {
+                let mut stencils = std::mem::take(&mut self.work.stencils);
+                let mut clock = std::time::Instant::now();
+                stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);
+                self.work.times.shape += lap(&mut clock);
+                let result = self.phases(dt, &stencils, Some(&stencils));
+                self.work.stencils = stencils;
+                result
+            }
+        }
+    }
+
+    /// The phases with B-spline stencils stored as factors (`W` nodes per axis).
+    fn tensor_phases<const W: usize>(
+        &mut self,
+        dt: f64,
+        storage: impl Fn(&mut Workspace<D>) -> &mut TensorStencils<D, W>,
+    ) -> Result<Vec<ParticleUpdate<D>>> {
+        let order = match W {
+            2 => BSplineOrder::Linear,
+            3 => BSplineOrder::Quadratic,
+            _ => BSplineOrder::Cubic,
+        };
+        let mut stencils = std::mem::take(storage(&mut self.work));
+        let mut clock = std::time::Instant::now();
+        stencils.compute(&BSpline::new(order), &self.grid, &self.particles.position);
+        self.work.times.shape += lap(&mut clock);
+        let result = self.phases(dt, &stencils, None);
+        *storage(&mut self.work) = stencils;
+        result
+    }
+
+    /// Body forces, VC, the transfers, the constitutive update and the checks, with the
+    /// particles' stencils (`stored`: the same as stored lists, when they are, for VC and the
+    /// lumping of signed shape functions).
+    fn phases<S: StencilView<D>>(
+        &mut self,
+        dt: f64,
+        stencils: &S,
+        stored: Option<&Stencils<D>>,
+    ) -> Result<Vec<ParticleUpdate<D>>> {
+        let plan = self.transfer_plan();
+        let grid = &self.grid;
+        let ps = &self.particles;
+        let work = &mut self.work;
+        let contact = self.options.contact;
+        let rigid: Vec<Option<Vector<D>>> =
+            self.materials.iter().map(|m| m.rigid_velocity()).collect();
+        let mut clock = std::time::Instant::now();
 
         // 2. Body forces.
         let body = match self.body_force.as_mut() {
@@ -267,32 +343,33 @@ impl<const D: usize> Sim<D> {
                 grid,
                 &ps.position,
                 &work.volumes,
-                &work.stencils,
+                stored.expect("VC runs with stored stencils"),
                 boundary,
                 &work.boundary_stencils,
                 &mut work.nodes,
             );
         }
 
+        work.times.forces_and_vc += lap(&mut clock);
+
         // 3. Particle to grid (one field, or one per body under contact).
         let velocity = |p: usize| ps.velocity[p];
-        let affine = |p: usize| ps.affine[p];
+        let affine_map = plan.apic.then_some(|p: usize| ps.affine[p]);
         let forces = Forces {
             gravity: self.options.gravity,
             body,
             vc: self.vc.as_ref(),
         };
-        let affine_map = plan
-            .apic
-            .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync));
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
         if let Some(contact) = contact {
             for (b, nodes) in work.bodies.iter_mut().enumerate() {
                 particle_to_grid(
                     grid,
                     ps,
-                    &work.stencils,
-                    &velocity,
+                    &work.bins,
+                    stencils,
+                    stored,
+                    velocity,
                     affine_map,
                     Some(forces),
                     Some(b as u32),
@@ -327,8 +404,10 @@ impl<const D: usize> Sim<D> {
             particle_to_grid(
                 grid,
                 ps,
-                &work.stencils,
-                &velocity,
+                &work.bins,
+                stencils,
+                stored,
+                velocity,
                 affine_map,
                 Some(forces),
                 None,
@@ -337,6 +416,7 @@ impl<const D: usize> Sim<D> {
             if boundary.has_tractions() {
                 apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
             }
+            work.times.particle_to_grid += lap(&mut clock);
             // 4. Grid update with the wall conditions.
             grid_update(
                 grid,
@@ -346,6 +426,8 @@ impl<const D: usize> Sim<D> {
                 mass_floor,
             );
         }
+
+        work.times.grid_update += lap(&mut clock);
 
         // 5. Grid to particle.
         let mut updates = std::mem::take(&mut work.updates);
@@ -358,7 +440,7 @@ impl<const D: usize> Sim<D> {
         grid_to_particle(
             grid,
             ps,
-            &work.stencils,
+            stencils,
             fields,
             &rigid,
             plan,
@@ -376,21 +458,20 @@ impl<const D: usize> Sim<D> {
                 }
             }
             let velocity = |p: usize| updates[p].velocity;
-            let affine = |p: usize| updates[p].affine;
             particle_to_grid(
                 grid,
                 ps,
-                &work.stencils,
-                &velocity,
-                plan.apic
-                    .then_some(&affine as &(dyn Fn(usize) -> Matrix<D> + Sync)),
+                &work.bins,
+                stencils,
+                stored,
+                velocity,
+                plan.apic.then_some(|p: usize| updates[p].affine),
                 None,
                 None,
                 &mut work.nodes,
             );
             grid_update(grid, &self.options.walls, &mut work.nodes, None, mass_floor);
             let nodes = &work.nodes;
-            let stencils = &work.stencils;
             updates.par_iter_mut().enumerate().for_each(|(p, u)| {
                 let l = velocity_gradient(stencils, nodes, p);
                 u.deformation_gradient =
@@ -427,6 +508,8 @@ impl<const D: usize> Sim<D> {
             }));
         }
 
+        work.times.grid_to_particle += lap(&mut clock);
+
         // 6. Constitutive update: elastic models from F, history models by return mapping
         //    from their state and the increment ΔF = F^{n+1} (F^n)⁻¹.
         let materials = &self.materials;
@@ -452,6 +535,8 @@ impl<const D: usize> Sim<D> {
             u.stress = block(&s3);
             u.pressure = pressure(&s3);
         });
+
+        work.times.constitutive += lap(&mut clock);
 
         // Particles stay inside the walls (see `Walls::clamp_to_walls`).
         let walls = &self.options.walls;
@@ -509,28 +594,53 @@ impl<const D: usize> Sim<D> {
             return Err(Error::new(ErrorKind::OutsideGrid, message));
         }
         work.boundary_updates = boundary_updates;
+        work.times.checks += lap(&mut clock);
         Ok(updates)
     }
 
-    /// Swaps the checked new state into the particles.
+    /// Copies the checked new state into the particles (in parallel, field by field).
     fn commit(&mut self, updates: Vec<ParticleUpdate<D>>) {
         let ps = &mut self.particles;
-        let apic = matches!(self.options.transfer, Transfer::Apic);
-        for (p, u) in updates.iter().enumerate() {
-            ps.position[p] = u.position;
-            ps.velocity[p] = u.velocity;
-            ps.deformation_gradient[p] = u.deformation_gradient;
-            ps.stress[p] = u.stress;
-            ps.pressure[p] = u.pressure;
-            if apic {
-                ps.affine[p] = u.affine;
-            }
-            if let Some(state) = ps.plastic.get_mut(p) {
-                if !self.materials[ps.material[p] as usize].is_elastic() {
-                    *state = u.plastic;
-                }
-            }
+        let u = &updates;
+        let fields = (
+            ps.position.par_iter_mut(),
+            ps.velocity.par_iter_mut(),
+            ps.deformation_gradient.par_iter_mut(),
+            ps.stress.par_iter_mut(),
+            ps.pressure.par_iter_mut(),
+            u.par_iter(),
+        );
+        if matches!(self.options.transfer, Transfer::Apic) {
+            (fields, ps.affine.par_iter_mut()).into_par_iter().for_each(
+                |((x, v, f, s, q, u), c)| {
+                    (*x, *v, *f, *s, *q, *c) = (
+                        u.position,
+                        u.velocity,
+                        u.deformation_gradient,
+                        u.stress,
+                        u.pressure,
+                        u.affine,
+                    )
+                },
+            );
+        } else {
+            fields.into_par_iter().for_each(|(x, v, f, s, q, u)| {
+                (*x, *v, *f, *s, *q) = (
+                    u.position,
+                    u.velocity,
+                    u.deformation_gradient,
+                    u.stress,
+                    u.pressure,
+                )
+            });
         }
+        let materials = &self.materials;
+        ps.plastic
+            .par_iter_mut()
+            .zip(&ps.material)
+            .zip(u)
+            .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
+            .for_each(|((state, _), u)| *state = u.plastic);
         self.work.updates = updates;
         let b = &mut self.boundary;
         for (k, u) in self.work.boundary_updates.iter().enumerate() {

@@ -5,11 +5,14 @@
 //! weights `L_I` are kept as shifts `Σ m_p (L_Ip − Ψ_Ip)(1, v_p, b_p)`, which the grid update
 //! blends in at nodes that barely overlap a body.
 
+use super::bins::Bins;
+use crate::grid::{scatter_add, NodeScatter};
 use crate::grid::{Grid, GridNodes};
 use crate::integration::VcCorrection;
 use crate::particles::Particles;
-use crate::shape::Stencils;
+use crate::shape::{StencilNode, StencilView, Stencils};
 use crate::{Matrix, Vector};
+use rayon::prelude::*;
 
 /// What the first map accumulates besides momentum: mass and forces.
 #[derive(Clone, Copy)]
@@ -26,33 +29,42 @@ pub struct Forces<'a, const D: usize> {
 /// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
 ///   particle's own, or the updated ones in the second map of MUSL).
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
-///
 /// * `body`: with contact, only the particles of this material map (to its own field).
 ///
-/// Serial in particle order, so the sums do not depend on the thread count.
+/// Runs in parallel by colours of grid blocks ([`Bins`]): every node's sum is taken in the same
+/// order with any number of threads.
 #[allow(clippy::too_many_arguments)]
-pub fn particle_to_grid<const D: usize>(
+pub fn particle_to_grid<const D: usize, S, A>(
     grid: &Grid<D>,
     ps: &Particles<D>,
-    stencils: &Stencils<D>,
-    velocity: &(dyn Fn(usize) -> Vector<D> + Sync),
-    affine: Option<&(dyn Fn(usize) -> Matrix<D> + Sync)>,
+    bins: &Bins<D>,
+    stencils: &S,
+    lumping: Option<&Stencils<D>>,
+    velocity: impl Fn(usize) -> Vector<D> + Sync,
+    affine: Option<A>,
     forces: Option<Forces<D>>,
     body: Option<u32>,
     nodes: &mut GridNodes<D>,
-) {
-    let with_gradient = !nodes.mass_gradient.is_empty() && forces.is_some();
-    for p in 0..ps.len() {
+) where
+    S: StencilView<D>,
+    A: Fn(usize) -> Matrix<D> + Sync,
+{
+    let vc = forces.and_then(|f| f.vc);
+    let out = NodeScatter::new(nodes);
+    let with_gradient = !out.mass_gradient.is_null() && forces.is_some();
+    let keep_body_force = !out.body_force.is_null();
+    let with_lumping = !out.lumping.0.is_null();
+    let scatter = |p: usize| {
         if body.is_some_and(|b| ps.material[p] != b) {
-            continue;
+            return;
         }
-        let (ns, ws, gs) = stencils.of(p);
-        let lumping = stencils.lumping_of(p);
+        let lumping = lumping
+            .and_then(|l| l.lumping_of(p))
+            .filter(|_| with_lumping);
         let m = ps.mass[p];
         let v = velocity(p);
-        let c = affine.map(|a| a(p));
+        let c = affine.as_ref().map(|a| a(p));
         let xp = ps.position[p];
-        let vc = forces.and_then(|f| f.vc);
         let force = forces.map(|f| {
             let b = match f.body {
                 Some(b) => f.gravity + b[p],
@@ -60,41 +72,61 @@ pub fn particle_to_grid<const D: usize>(
             };
             (-ps.volume(p) * ps.stress[p], b)
         });
-        for s in 0..ns.len() {
-            let (n, w) = (ns[s], ws[s]);
-            let shift = lumping.map_or(0.0, |l| l[s] - w);
-            if w == 0.0 && shift == 0.0 && gs[s] == Vector::<D>::zeros() {
-                continue;
-            }
-            nodes.touch(n);
-            let mut mv = v;
-            if let Some(c) = c {
-                mv += c * (grid.node_position(grid.node_multi_index(n)) - xp);
-            }
-            nodes.momentum[n] += (m * w) * mv;
-            if let Some(l) = nodes.lumping.as_mut() {
-                l.momentum[n] += (m * shift) * mv;
-                if let Some((_, b)) = force {
-                    l.mass[n] += m * shift;
-                    l.body_force[n] += (m * shift) * b;
+        stencils.for_each(
+            p,
+            |s,
+             StencilNode {
+                 node: n,
+                 value: w,
+                 gradient: g,
+             }| {
+                let shift = lumping.map_or(0.0, |l| l[s] - w);
+                if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
+                    return;
                 }
-            }
-            if let Some((vs, b)) = force {
-                let grad = match vc {
-                    Some(vc) => gs[s] + vc.gradient_correction(grid, nodes, n, &xp),
-                    None => gs[s],
-                };
-                nodes.mass[n] += m * w;
-                if with_gradient {
-                    nodes.mass_gradient[n] += m * gs[s];
+                // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
+                // one colour at a time.
+                unsafe {
+                    out.touch(n);
+                    let mut mv = v;
+                    if let Some(c) = c {
+                        mv += c * stencils.offset(grid, p, s, n, &xp);
+                    }
+                    scatter_add(out.momentum, n, (m * w) * mv);
+                    if with_lumping {
+                        scatter_add(out.lumping.1, n, (m * shift) * mv);
+                        if let Some((_, b)) = force {
+                            scatter_add(out.lumping.0, n, m * shift);
+                            scatter_add(out.lumping.2, n, (m * shift) * b);
+                        }
+                    }
+                    if let Some((vs, b)) = force {
+                        let grad = match vc {
+                            Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
+                            None => g,
+                        };
+                        scatter_add(out.mass, n, m * w);
+                        if with_gradient {
+                            scatter_add(out.mass_gradient, n, m * g);
+                        }
+                        scatter_add(out.force, n, vs * grad);
+                        if keep_body_force {
+                            scatter_add(out.body_force, n, (m * w) * b);
+                        } else {
+                            scatter_add(out.force, n, (m * w) * b);
+                        }
+                    }
                 }
-                nodes.force[n] += vs * grad;
-                if nodes.body_force.is_empty() {
-                    nodes.force[n] += (m * w) * b;
-                } else {
-                    nodes.body_force[n] += (m * w) * b;
-                }
+            },
+        );
+    };
+    for colour in &bins.colours {
+        colour.par_iter().for_each(|&b| {
+            let range = bins.occupied[b as usize].1.clone();
+            for &p in &bins.order[range] {
+                scatter(p as usize);
             }
-        }
+        });
     }
+    bins.collect_active(grid, nodes);
 }

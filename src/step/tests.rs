@@ -4,6 +4,7 @@
 use crate::boundary::{Boundary, Side};
 use crate::error::ErrorKind;
 use crate::material::Material;
+use crate::particles::Particles;
 use crate::scenes::{run_vibrating_bar, VibratingBar};
 use crate::shape::Shape;
 use crate::sim::{Scheme, Sim, Transfer};
@@ -448,29 +449,29 @@ fn lattice_boundary_points_come_with_a_successful_first_step_only() {
 }
 
 /// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
-/// 2 worker threads (P2G runs in particle order; the parallel phases are per particle), for
-/// B-splines with APIC and for RK with VC.
+/// 2 worker threads (P2G runs by colours of grid blocks; the other phases are per particle or
+/// per node), for B-splines with APIC and for RK with VC, in 2D and 3D.
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    let run = |threads: usize, shape: Shape, vc: bool| {
+    fn run<const D: usize>(threads: usize, shape: Shape, vc: bool) -> Particles<D> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {
-            let mut sim = block::<2>(shape, Transfer::Apic);
+            let mut sim = block::<D>(shape, Transfer::Apic);
             if vc {
                 sim.set_integration(crate::sim::Integration::Vc { order: 1 })
                     .unwrap();
             }
-            sim.set_gravity([0.0, -9.81]).unwrap();
+            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
             let dt = sim.stable_dt(0.3).unwrap();
             for _ in 0..15 {
                 sim.step(dt).unwrap();
             }
             sim.particles().clone()
         })
-    };
+    }
     for (shape, vc) in [
         (Shape::BSpline2, false),
         (
@@ -481,7 +482,8 @@ fn results_do_not_depend_on_the_thread_count() {
             true,
         ),
     ] {
-        assert_eq!(run(1, shape, vc), run(2, shape, vc), "{shape:?}");
+        assert_eq!(run::<2>(1, shape, vc), run::<2>(2, shape, vc), "{shape:?}");
+        assert_eq!(run::<3>(1, shape, vc), run::<3>(2, shape, vc), "{shape:?}");
     }
 }
 
@@ -551,4 +553,97 @@ fn rk2_lumping_at_the_edge_of_a_body() {
     let drift = (sim.particles().momentum() - p0).norm() / p0.norm();
     assert!(drift < 1e-2, "momentum drift {drift:e}");
     eprintln!("RK2 spinning block: relative momentum drift over 10 steps {drift:e}");
+}
+
+/// B-spline stencils stored as 1D factors give the same particle data, bit for bit, as the
+/// stencils stored node by node (APIC and FLIP, USL and MUSL, 2D and 3D).
+#[test]
+fn factored_and_stored_stencils_give_the_same_bits() {
+    fn run<const D: usize>(
+        shape: Shape,
+        transfer: Transfer,
+        musl: bool,
+        stored: bool,
+    ) -> Particles<D> {
+        let mut sim = block::<D>(shape, transfer);
+        if musl {
+            sim.set_scheme(Scheme::Musl).unwrap();
+        }
+        sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
+        sim.set_stored_stencils(stored);
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..8 {
+            sim.step(dt).unwrap();
+        }
+        sim.particles().clone()
+    }
+    for shape in [Shape::Linear, Shape::BSpline2, Shape::BSpline3] {
+        for (transfer, musl) in [
+            (Transfer::Apic, false),
+            (Transfer::PicFlip { flip: 0.95 }, true),
+        ] {
+            assert_eq!(
+                run::<2>(shape, transfer, musl, false),
+                run::<2>(shape, transfer, musl, true),
+                "{shape:?} {transfer:?} 2D"
+            );
+            assert_eq!(
+                run::<3>(shape, transfer, musl, false),
+                run::<3>(shape, transfer, musl, true),
+                "{shape:?} {transfer:?} 3D"
+            );
+        }
+    }
+}
+
+/// The bins hold every particle once, in index order within a block; blocks of one colour are
+/// two blocks apart along some axis, so the stencils of their particles never share a node.
+#[test]
+fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
+    use crate::shape::{ShapeFunction, StencilView, Stencils};
+    use crate::step::Bins;
+    let mut rng = crate::shape::UniformRng::new(5);
+    for shape in [
+        Shape::Linear,
+        Shape::BSpline3,
+        Shape::Rk {
+            order: 2,
+            support: 3.0,
+        },
+    ] {
+        let f: Box<dyn ShapeFunction<2>> = shape.build().unwrap();
+        let mut grid = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [70, 23], 0.1).unwrap();
+        grid.set_ghost_layers(f.ghost_layers()).unwrap();
+        let x: Vec<Vector<2>> = (0..4000)
+            .map(|_| Vector::<2>::new(7.0 * rng.uniform(), 2.3 * rng.uniform()))
+            .collect();
+        let mut bins = Bins::<2>::default();
+        bins.compute(f.as_ref(), &grid, &x);
+        let mut seen = vec![0; x.len()];
+        for (_, range) in &bins.occupied {
+            let ps = &bins.order[range.clone()];
+            assert!(ps.windows(2).all(|w| w[0] < w[1]));
+            ps.iter().for_each(|&p| seen[p as usize] += 1);
+        }
+        assert!(seen.iter().all(|&c| c == 1), "{shape:?}");
+        let mut stencils = Stencils::<2>::default();
+        stencils.compute(f.as_ref(), &grid, &x);
+        let mut blocks_seen = 0;
+        for colour in &bins.colours {
+            let mut owner = vec![u32::MAX; grid.node_count()];
+            for &b in colour {
+                blocks_seen += 1;
+                for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
+                    stencils.for_each(p as usize, |_, s| {
+                        if s.value != 0.0 || s.gradient != Vector::<2>::zeros() {
+                            assert!(owner[s.node] == u32::MAX || owner[s.node] == b, "{shape:?}");
+                            owner[s.node] = b;
+                        }
+                    });
+                }
+            }
+        }
+        assert_eq!(blocks_seen, bins.occupied.len());
+        assert!(bins.colours.iter().filter(|c| !c.is_empty()).count() == 4);
+    }
 }

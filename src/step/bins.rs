@@ -1,0 +1,188 @@
+//! Particles binned by grid block, for a particle-to-grid map that runs in parallel without locks
+//! and gives the same bits with any number of threads.
+//!
+//! A block is `B_a` nodes along axis `a` (32 along axis 0, 4 along the others; more for wide
+//! stencils). A particle belongs to the block of the first node of its stencil box
+//! (`ShapeFunction::stencil_origin`), so with `B_a ≥ W − 1` (`W` stencil nodes per axis) its
+//! stencil lies in its own block and the next one along each axis. Blocks take one of
+//! `2^D` colours by the parity of their block coordinates; two blocks of one colour are at least
+//! two blocks apart along some axis, so they write disjoint nodes. The map runs colour by colour,
+//! the blocks of a colour in parallel, the particles of a block in index order: every node's
+//! sum is taken in an order fixed by the particle positions alone.
+//!
+//! The occupied blocks also give the node blocks a step touches (each occupied block and its
+//! upper neighbours), so the list of active nodes is collected without visiting empty blocks.
+
+use crate::grid::{Grid, GridNodes};
+use crate::shape::ShapeFunction;
+use crate::Vector;
+use rayon::prelude::*;
+
+/// Nodes per block side, at least.
+const MIN_BLOCK: usize = 4;
+/// Nodes per block along axis 0, the fastest storage axis of the grid and, usually, of the
+/// particles (lattices are added with axis 0 fastest): a block's particles then lie in long runs
+/// of the particle arrays. Measured on the 2D quadratic B-spline benchmark block (10^6
+/// particles, one thread), particle to grid took 149 ns per particle with blocks of 4 × 4 nodes,
+/// 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4.
+const LONG_BLOCK: usize = 32;
+
+/// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
+#[derive(Debug, Clone)]
+pub struct Bins<const D: usize> {
+    /// Nodes per block side, per axis.
+    pub block: [usize; D],
+    /// Blocks per axis (covering every stored node).
+    blocks: [usize; D],
+    /// Block of each particle.
+    keys: Vec<u32>,
+    /// Particle indices, block by block (ascending keys), ascending within a block.
+    pub order: Vec<u32>,
+    /// Occupied blocks in ascending key order: key and the range of `order` they hold.
+    pub occupied: Vec<(u32, std::ops::Range<usize>)>,
+    /// Indices into `occupied`, per colour.
+    pub colours: Vec<Vec<u32>>,
+    /// Node blocks touched by some particle's stencil, ascending.
+    pub node_blocks: Vec<u32>,
+    /// Scratch: particles per block, then start offsets; and node-block marks.
+    counts: Vec<u32>,
+    marks: Vec<bool>,
+}
+
+impl<const D: usize> Default for Bins<D> {
+    fn default() -> Self {
+        Bins {
+            block: [MIN_BLOCK; D],
+            blocks: [0; D],
+            keys: Vec::new(),
+            order: Vec::new(),
+            occupied: Vec::new(),
+            colours: Vec::new(),
+            node_blocks: Vec::new(),
+            counts: Vec::new(),
+            marks: Vec::new(),
+        }
+    }
+}
+
+impl<const D: usize> Bins<D> {
+    /// Bins the particles at `x` for `shape` on `grid`.
+    pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
+        let side = (shape.stencil_width().max(2) - 1).max(MIN_BLOCK);
+        let long = side.max(LONG_BLOCK);
+        let block: [usize; D] = std::array::from_fn(|a| if a == 0 { long } else { side });
+        let dims = grid.dims();
+        let blocks: [usize; D] = std::array::from_fn(|a| dims[a].div_ceil(block[a]));
+        let total: usize = blocks.iter().product();
+        assert!(total < u32::MAX as usize && x.len() < u32::MAX as usize);
+        self.block = block;
+        self.blocks = blocks;
+        let ghost = grid.ghost_layers() as i64;
+        // Block of every particle, from its stencil's first node (clamped: a particle outside
+        // the grid is refused by the step's checks before it gets here).
+        self.keys.resize(x.len(), 0);
+        self.keys
+            .par_iter_mut()
+            .zip(x.par_iter())
+            .for_each(|(k, xp)| {
+                let first = shape.stencil_origin(&grid.to_cell_units(xp));
+                let mut key = 0usize;
+                for a in (0..D).rev() {
+                    let s = (first[a] + ghost).clamp(0, dims[a] as i64 - 1) as usize;
+                    key = key * blocks[a] + s / block[a];
+                }
+                *k = key as u32;
+            });
+        // Counting sort (stable: particles of a block stay in index order).
+        self.counts.clear();
+        self.counts.resize(total + 1, 0);
+        for &k in &self.keys {
+            self.counts[k as usize + 1] += 1;
+        }
+        self.occupied.clear();
+        for b in 0..total {
+            let (start, n) = (self.counts[b], self.counts[b + 1]);
+            if n > 0 {
+                self.occupied
+                    .push((b as u32, start as usize..(start + n) as usize));
+            }
+            self.counts[b + 1] = start + n;
+        }
+        self.order.resize(x.len(), 0);
+        for (p, &k) in self.keys.iter().enumerate() {
+            let slot = &mut self.counts[k as usize];
+            self.order[*slot as usize] = p as u32;
+            *slot += 1;
+        }
+        // Colours, and the node blocks each occupied block touches (itself and its upper
+        // neighbours).
+        self.colours.resize(1 << D, Vec::new());
+        self.colours.iter_mut().for_each(Vec::clear);
+        self.marks.clear();
+        self.marks.resize(total, false);
+        for (i, (key, _)) in self.occupied.iter().enumerate() {
+            let c = self.coords(*key as usize);
+            let colour = (0..D).map(|a| (c[a] & 1) << a).sum::<usize>();
+            self.colours[colour].push(i as u32);
+            for corner in 0..1usize << D {
+                let mut key = 0usize;
+                let mut inside = true;
+                for a in (0..D).rev() {
+                    let ca = c[a] + (corner >> a & 1);
+                    inside &= ca < blocks[a];
+                    key = key * blocks[a] + ca;
+                }
+                if inside {
+                    self.marks[key] = true;
+                }
+            }
+        }
+        self.node_blocks.clear();
+        self.node_blocks.extend(
+            self.marks
+                .iter()
+                .enumerate()
+                .filter(|(_, &m)| m)
+                .map(|(k, _)| k as u32),
+        );
+    }
+
+    /// Block coordinates of block `key`.
+    fn coords(&self, mut key: usize) -> [usize; D] {
+        std::array::from_fn(|a| {
+            let c = key % self.blocks[a];
+            key /= self.blocks[a];
+            c
+        })
+    }
+
+    /// Appends to `nodes.active` every node of the touched node blocks that was marked touched
+    /// and is not listed yet, block by block in ascending order (see
+    /// [`GridNodes::collect_touched`]).
+    pub fn collect_active(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) {
+        let dims = grid.dims();
+        let strides = grid.strides();
+        'blocks: for &key in &self.node_blocks {
+            let c = self.coords(key as usize);
+            let lo: [usize; D] = std::array::from_fn(|a| c[a] * self.block[a]);
+            let hi: [usize; D] = std::array::from_fn(|a| ((c[a] + 1) * self.block[a]).min(dims[a]));
+            let mut i = lo;
+            loop {
+                let n: usize = (0..D).map(|a| i[a] * strides[a]).sum();
+                nodes.collect_touched(n);
+                let mut a = 0;
+                loop {
+                    i[a] += 1;
+                    if i[a] < hi[a] {
+                        break;
+                    }
+                    i[a] = lo[a];
+                    a += 1;
+                    if a == D {
+                        continue 'blocks;
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,54 @@
+//! Wall-clock time per phase of the steps, so that a benchmark shows which phase moved.
+
+use std::time::Instant;
+
+/// Seconds spent in each phase of the steps taken so far (summed over steps).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct PhaseTimes {
+    /// Binning particles by grid block.
+    pub bins: f64,
+    /// Shape-function values and gradients (and RK moment solves).
+    pub shape: f64,
+    /// Body forces, boundary points and VC corrections.
+    pub forces_and_vc: f64,
+    pub particle_to_grid: f64,
+    pub grid_update: f64,
+    pub grid_to_particle: f64,
+    /// Constitutive update (stress, return mapping).
+    pub constitutive: f64,
+    /// Checks of the new state.
+    pub checks: f64,
+    /// Committing the new state and resetting the grid.
+    pub commit: f64,
+}
+
+impl PhaseTimes {
+    /// The phases with their names, in step order.
+    pub fn phases(&self) -> [(&'static str, f64); 9] {
+        [
+            ("bins", self.bins),
+            ("shape", self.shape),
+            ("forces_vc", self.forces_and_vc),
+            ("p2g", self.particle_to_grid),
+            ("grid", self.grid_update),
+            ("g2p", self.grid_to_particle),
+            ("constitutive", self.constitutive),
+            ("checks", self.checks),
+            ("commit", self.commit),
+        ]
+    }
+
+    /// Sum over the phases.
+    pub fn total(&self) -> f64 {
+        self.phases().iter().map(|p| p.1).sum()
+    }
+}
+
+/// Seconds since `clock`, which is reset to now.
+#[inline]
+pub(crate) fn lap(clock: &mut Instant) -> f64 {
+    let now = Instant::now();
+    let dt = now.duration_since(*clock).as_secs_f64();
+    *clock = now;
+    dt
+}
