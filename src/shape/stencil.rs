@@ -33,6 +33,25 @@ pub trait StencilView<const D: usize>: Sync {
 
     /// `x_I − x_p` for the node of slot `s` of particle `p` at `x_p` (APIC).
     fn offset(&self, grid: &Grid<D>, p: usize, s: usize, node: usize, xp: &Vector<D>) -> Vector<D>;
+
+    /// [`StencilView::for_each`] with `x_I − x_p` as the third argument when `xp` is given
+    /// (the same bits as [`StencilView::offset`]; zero without `xp`).
+    #[inline(always)]
+    fn for_each_with_offset(
+        &self,
+        grid: &Grid<D>,
+        p: usize,
+        xp: Option<&Vector<D>>,
+        mut f: impl FnMut(usize, StencilNode<D>, Vector<D>),
+    ) {
+        self.for_each(p, |s, node| {
+            let offset = match xp {
+                Some(xp) => self.offset(grid, p, s, node.node, xp),
+                None => Vector::zeros(),
+            };
+            f(s, node, offset)
+        });
+    }
 }
 
 /// Shape-function values and gradients of every particle, stored node by node.
@@ -198,15 +217,33 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     }
 }
 
-impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
+impl<const D: usize, const W: usize> TensorStencils<D, W> {
+    /// Visits the stencil of particle `p`, with `x_I − x_p` when `xp` is given (zero otherwise).
     #[inline(always)]
-    fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
+    fn visit(
+        &self,
+        p: usize,
+        xp: Option<&Vector<D>>,
+        mut f: impl FnMut(usize, StencilNode<D>, Vector<D>),
+    ) {
         let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
+        // 1D offsets per axis, as `Grid::node_position` forms them, so that both views give
+        // the same bits.
+        let mut offsets = [[0.0; W]; D];
+        if let Some(xp) = xp {
+            let first = &self.first[p];
+            for (a, o) in offsets.iter_mut().enumerate() {
+                for (k, o) in o.iter_mut().enumerate() {
+                    *o = self.origin[a] + (first[a] + k as i64) as f64 * self.cell_size - xp[a];
+                }
+            }
+        }
         // Same slot order as `ShapeFunction::evaluate`: axis 0 fastest.
         let mut k = [0usize; D];
         let mut node = base;
         for s in 0..W.pow(D as u32) {
             let (value, gradient) = tensor_product(w, dw, &k);
+            let offset = Vector::<D>::from_fn(|a, _| offsets[a][k[a]]);
             f(
                 s,
                 StencilNode {
@@ -214,6 +251,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                     value,
                     gradient,
                 },
+                offset,
             );
             for (ka, stride) in k.iter_mut().zip(self.strides) {
                 *ka += 1;
@@ -225,6 +263,24 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                 node -= W * stride;
             }
         }
+    }
+}
+
+impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
+    #[inline(always)]
+    fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
+        self.visit(p, None, |s, node, _| f(s, node));
+    }
+
+    #[inline(always)]
+    fn for_each_with_offset(
+        &self,
+        _grid: &Grid<D>,
+        p: usize,
+        xp: Option<&Vector<D>>,
+        f: impl FnMut(usize, StencilNode<D>, Vector<D>),
+    ) {
+        self.visit(p, xp, f);
     }
 
     #[inline(always)]

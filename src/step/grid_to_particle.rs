@@ -79,6 +79,9 @@ pub fn velocity_gradient<const D: usize>(
     l
 }
 
+/// Completes particle `p`'s new state and says whether it is admissible.
+pub type Finish<'a, const D: usize> = dyn Fn(usize, &mut ParticleUpdate<D>) -> bool + Sync + 'a;
+
 /// The grid fields particles read: one for all, or one per body under contact.
 #[derive(Clone, Copy)]
 pub enum Fields<'a, const D: usize> {
@@ -101,6 +104,10 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// Gathers the new velocity, affine matrix and position of every particle, and under USL its new
 /// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map). Particles of
 /// a rigid material (`rigid[material]` is its velocity) move with it and keep their `F`.
+///
+/// `finish(p, u)`, when given, completes particle `p`'s new state while it is in cache (the
+/// constitutive update and the checks under USL) and says whether it is admissible; `admissible`
+/// receives that (true for every particle without `finish`).
 #[allow(clippy::too_many_arguments)]
 pub fn grid_to_particle<const D: usize>(
     grid: &Grid<D>,
@@ -110,12 +117,15 @@ pub fn grid_to_particle<const D: usize>(
     rigid: &[Option<Vector<D>>],
     plan: TransferPlan,
     dt: f64,
-    update_deformation: bool,
+    finish: Option<&Finish<'_, D>>,
     updates: &mut Vec<ParticleUpdate<D>>,
+    admissible: &mut Vec<bool>,
 ) {
     updates.resize(ps.len(), ParticleUpdate::default());
     let flip = plan.flip > 0.0;
-    updates.par_iter_mut().enumerate().for_each(|(p, u)| {
+    let update_deformation = finish.is_some();
+    let apic_inertia = plan.inverse_inertia.is_some();
+    let gather = |p: usize, u: &mut ParticleUpdate<D>| {
         let xp = ps.position[p];
         if let Some(v) = rigid.get(ps.material[p] as usize).copied().flatten() {
             u.position = xp + dt * v;
@@ -129,25 +139,19 @@ pub fn grid_to_particle<const D: usize>(
         let mut dv = Vector::<D>::zeros();
         let mut b = Matrix::<D>::zeros();
         let mut l = Matrix::<D>::zeros();
-        stencils.for_each(
-            p,
-            |s,
-             StencilNode {
-                 node: n,
-                 value: w,
-                 gradient: g,
-             }| {
-                let vi = nodes.velocity[n];
-                v_pic += w * vi;
-                if flip {
-                    dv += w * (vi - nodes.velocity_old[n]);
-                }
-                if plan.inverse_inertia.is_some() {
-                    b += (w * vi) * stencils.offset(grid, p, s, n, &xp).transpose();
-                }
-                l += vi * g.transpose();
-            },
-        );
+        let mut node_sums = |_: usize, node: StencilNode<D>, offset: Vector<D>| {
+            let (n, w) = (node.node, node.value);
+            let vi = nodes.velocity[n];
+            v_pic += w * vi;
+            if flip {
+                dv += w * (vi - nodes.velocity_old[n]);
+            }
+            if apic_inertia {
+                b += (w * vi) * offset.transpose();
+            }
+            l += vi * node.gradient.transpose();
+        };
+        stencils.for_each_with_offset(grid, p, apic_inertia.then_some(&xp), &mut node_sums);
         u.position = xp + dt * v_pic;
         u.velocity = if flip {
             (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
@@ -164,5 +168,13 @@ pub fn grid_to_particle<const D: usize>(
             u.deformation_gradient =
                 (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
         }
-    });
+    };
+    updates
+        .par_iter_mut()
+        .enumerate()
+        .map(|(p, u)| {
+            gather(p, u);
+            finish.is_none_or(|f| f(p, u))
+        })
+        .collect_into_vec(admissible);
 }

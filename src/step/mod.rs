@@ -62,6 +62,8 @@ pub struct Workspace<const D: usize> {
     pub shared: Vec<usize>,
     pub body_acceleration: Vec<Vector<D>>,
     pub updates: Vec<ParticleUpdate<D>>,
+    /// Whether each new particle state passed the checks.
+    pub admissible: Vec<bool>,
 }
 
 /// The new state of one boundary point.
@@ -429,6 +431,41 @@ impl<const D: usize> Sim<D> {
 
         work.times.grid_update += lap(&mut clock);
 
+        // 6. (defined here, run inside the gather under USL) Constitutive update: elastic models
+        //    from F, history models by return mapping from their state and the increment
+        //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
+        let materials = &self.materials;
+        let walls = &self.options.walls;
+        let any_wall = walls.any_wall();
+        let finish = |p: usize, u: &mut ParticleUpdate<D>| -> bool {
+            let j = crate::determinant(&u.deformation_gradient);
+            if j.is_nan() || j <= 0.0 {
+                // Inverted or not finite: the checks reject the step; no stress to compute.
+                u.stress = Matrix::zeros();
+                u.pressure = 0.0;
+                return false;
+            }
+            let material = &materials[ps.material[p] as usize];
+            let f = embed3(&u.deformation_gradient);
+            let s3 = if material.is_elastic() {
+                material.cauchy_stress(&f)
+            } else {
+                let f_old = embed3(&ps.deformation_gradient[p]);
+                let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
+                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
+                u.plastic = state;
+                s3
+            };
+            u.stress = block(&s3);
+            u.pressure = pressure(&s3);
+            // Particles stay inside the walls (see `Walls::clamp_to_walls`).
+            if any_wall {
+                walls.clamp_to_walls(grid, &mut u.position);
+            }
+            u.check(grid).is_ok()
+        };
+        let mut admissible = std::mem::take(&mut work.admissible);
+
         // 5. Grid to particle.
         let mut updates = std::mem::take(&mut work.updates);
         let usl = self.options.scheme == Scheme::Usl;
@@ -445,8 +482,9 @@ impl<const D: usize> Sim<D> {
             &rigid,
             plan,
             dt,
-            usl,
+            usl.then_some(&finish),
             &mut updates,
+            &mut admissible,
         );
         if !usl {
             // MUSL: map the new particle momenta to the grid again; the velocity gradient uses
@@ -509,50 +547,20 @@ impl<const D: usize> Sim<D> {
         }
 
         work.times.grid_to_particle += lap(&mut clock);
-
-        // 6. Constitutive update: elastic models from F, history models by return mapping
-        //    from their state and the increment ΔF = F^{n+1} (F^n)⁻¹.
-        let materials = &self.materials;
-        updates.par_iter_mut().enumerate().for_each(|(p, u)| {
-            let j = crate::determinant(&u.deformation_gradient);
-            if j.is_nan() || j <= 0.0 {
-                // Inverted or not finite: the checks reject the step; no stress to compute.
-                u.stress = Matrix::zeros();
-                u.pressure = 0.0;
-                return;
-            }
-            let material = &materials[ps.material[p] as usize];
-            let f = embed3(&u.deformation_gradient);
-            let s3 = if material.is_elastic() {
-                material.cauchy_stress(&f)
-            } else {
-                let f_old = embed3(&ps.deformation_gradient[p]);
-                let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
-                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
-                u.plastic = state;
-                s3
-            };
-            u.stress = block(&s3);
-            u.pressure = pressure(&s3);
-        });
-
-        work.times.constitutive += lap(&mut clock);
-
-        // Particles stay inside the walls (see `Walls::clamp_to_walls`).
-        let walls = &self.options.walls;
-        if walls.any_wall() {
+        if !usl {
             updates
                 .par_iter_mut()
-                .for_each(|u| walls.clamp_to_walls(grid, &mut u.position));
+                .enumerate()
+                .map(|(p, u)| finish(p, u))
+                .collect_into_vec(&mut admissible);
+            work.times.constitutive += lap(&mut clock);
         }
 
         // Checks: the first bad particle (lowest index) is reported.
-        let bad = updates
-            .par_iter()
-            .enumerate()
-            .find_first(|(_, u)| u.check(grid).is_err());
-        if let Some((p, u)) = bad {
-            let (kind, what) = u.check(grid).unwrap_err();
+        let bad = admissible.iter().position(|ok| !ok);
+        work.admissible = admissible;
+        if let Some(p) = bad {
+            let (kind, what) = updates[p].check(grid).unwrap_err();
             let message = format!(
                 "step {} (t = {:e}, dt = {dt:e}) rejected: particle {p} {what}; the simulation keeps its last good state",
                 self.steps + 1,

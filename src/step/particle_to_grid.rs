@@ -54,6 +54,9 @@ pub fn particle_to_grid<const D: usize, S, A>(
     let with_gradient = !out.mass_gradient.is_null() && forces.is_some();
     let keep_body_force = !out.body_force.is_null();
     let with_lumping = !out.lumping.0.is_null();
+    // No body-force sums when there is no gravity and no body-force callback.
+    let with_body_force =
+        forces.is_some_and(|f| f.body.is_some() || f.gravity != Vector::<D>::zeros());
     let scatter = |p: usize| {
         if body.is_some_and(|b| ps.material[p] != b) {
             return;
@@ -97,7 +100,9 @@ pub fn particle_to_grid<const D: usize, S, A>(
                         scatter_add(out.lumping.1, n, (m * shift) * mv);
                         if let Some((_, b)) = force {
                             scatter_add(out.lumping.0, n, m * shift);
-                            scatter_add(out.lumping.2, n, (m * shift) * b);
+                            if with_body_force {
+                                scatter_add(out.lumping.2, n, (m * shift) * b);
+                            }
                         }
                     }
                     if let Some((vs, b)) = force {
@@ -110,7 +115,9 @@ pub fn particle_to_grid<const D: usize, S, A>(
                             scatter_add(out.mass_gradient, n, m * g);
                         }
                         scatter_add(out.force, n, vs * grad);
-                        if keep_body_force {
+                        if !with_body_force {
+                            // Nothing to add.
+                        } else if keep_body_force {
                             scatter_add(out.body_force, n, (m * w) * b);
                         } else {
                             scatter_add(out.force, n, (m * w) * b);
