@@ -137,18 +137,37 @@ impl BSpline {
             derivatives: [[0.0; 4]; D],
         };
         for a in 0..D {
-            f.first[a] = self.order.first_node(xi[a]);
-            if self.order == BSplineOrder::Linear {
-                // The two nodes of the cell, with the cell's one-sided gradient also on a node.
-                let r = xi[a] - f.first[a] as f64;
-                f.values[a][..2].copy_from_slice(&[1.0 - r, r]);
-                f.derivatives[a][..2].copy_from_slice(&[-inv_h, inv_h]);
-                continue;
+            let first = self.order.first_node(xi[a]);
+            f.first[a] = first;
+            // Distance from the first node in cells; the kernel at `t − k` in closed form (the
+            // branches of `BSplineOrder::kernel` are known from the range of `t`).
+            let t = xi[a] - first as f64;
+            let (w, dw) = (&mut f.values[a], &mut f.derivatives[a]);
+            match self.order {
+                BSplineOrder::Linear => {
+                    // The two nodes of the cell, with the cell's one-sided gradient also on a
+                    // node. t ∈ [0, 1].
+                    (w[0], w[1]) = (1.0 - t, t);
+                    (dw[0], dw[1]) = (-1.0, 1.0);
+                }
+                BSplineOrder::Quadratic => {
+                    // t ∈ [0.5, 1.5).
+                    let (u, c, l) = (1.5 - t, t - 1.0, t - 0.5);
+                    (w[0], w[1], w[2]) = (0.5 * u * u, 0.75 - c * c, 0.5 * l * l);
+                    (dw[0], dw[1], dw[2]) = (-u, -2.0 * c, l);
+                }
+                BSplineOrder::Cubic => {
+                    // t ∈ [1, 2): distances t, t − 1, 2 − t (mirrored) and 3 − t from the nodes.
+                    let (u, r1, r2, l) = (2.0 - t, t - 1.0, 2.0 - t, t - 1.0);
+                    let inner =
+                        |r: f64| (0.5 * r * r * r - r * r + 2.0 / 3.0, 1.5 * r * r - 2.0 * r);
+                    let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
+                    (w[0], w[1], w[2], w[3]) = (u * u * u / 6.0, w1, w2, l * l * l / 6.0);
+                    (dw[0], dw[1], dw[2], dw[3]) = (-0.5 * u * u, d1, -d2, 0.5 * l * l);
+                }
             }
-            for k in 0..width {
-                let (v, dv) = self.order.kernel(xi[a] - (f.first[a] + k as i64) as f64);
-                f.values[a][k] = v;
-                f.derivatives[a][k] = dv * inv_h;
+            for d in dw.iter_mut().take(width) {
+                *d *= inv_h;
             }
         }
         f

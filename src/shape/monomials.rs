@@ -3,6 +3,9 @@
 
 use crate::Vector;
 
+/// Highest degree a basis may have.
+pub const MAX_DEGREE: usize = 8;
+
 /// Monomials `z^e` with `|e| ≤ degree`, the constant first, then by degree.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Monomials<const D: usize> {
@@ -10,7 +13,12 @@ pub struct Monomials<const D: usize> {
 }
 
 impl<const D: usize> Monomials<D> {
+    /// The monomials of degree ≤ `degree` (at most [`MAX_DEGREE`]).
     pub fn up_to(degree: u32) -> Self {
+        assert!(
+            degree as usize <= MAX_DEGREE,
+            "monomial degree above {MAX_DEGREE}"
+        );
         let mut exponents = Vec::new();
         for d in 0..=degree {
             of_degree::<D>(d, &mut [0; D], 0, &mut exponents);
@@ -30,30 +38,51 @@ impl<const D: usize> Monomials<D> {
         &self.exponents
     }
 
+    /// Highest degree of the basis.
+    fn degree(&self) -> usize {
+        self.exponents
+            .last()
+            .map_or(0, |e| e.iter().sum::<u32>() as usize)
+    }
+
+    /// `z_a^p` for every axis and `p ≤ degree` (`MAX_DEGREE` at most).
+    #[inline]
+    fn powers(&self, z: &Vector<D>) -> [[f64; MAX_DEGREE + 1]; D] {
+        let mut pw = [[1.0; MAX_DEGREE + 1]; D];
+        for a in 0..D {
+            for p in 1..=self.degree().min(MAX_DEGREE) {
+                pw[a][p] = pw[a][p - 1] * z[a];
+            }
+        }
+        pw
+    }
+
     /// Writes `z^e` for every monomial into `out`.
     #[inline]
     pub fn values(&self, z: &Vector<D>, out: &mut [f64]) {
+        let pw = self.powers(z);
         for (o, e) in out.iter_mut().zip(&self.exponents) {
-            *o = (0..D).map(|a| z[a].powi(e[a] as i32)).product();
+            let mut v = 1.0;
+            for a in 0..D {
+                v *= pw[a][e[a] as usize];
+            }
+            *o = v;
         }
     }
 
     /// Writes `∂(z^e)/∂z_k` for every monomial into `out`.
     #[inline]
     pub fn derivatives(&self, z: &Vector<D>, k: usize, out: &mut [f64]) {
+        let pw = self.powers(z);
         for (o, e) in out.iter_mut().zip(&self.exponents) {
             *o = if e[k] == 0 {
                 0.0
             } else {
-                (0..D)
-                    .map(|a| {
-                        if a == k {
-                            e[a] as f64 * z[a].powi(e[a] as i32 - 1)
-                        } else {
-                            z[a].powi(e[a] as i32)
-                        }
-                    })
-                    .product()
+                let mut v = e[k] as f64;
+                for a in 0..D {
+                    v *= pw[a][e[a] as usize - usize::from(a == k)];
+                }
+                v
             };
         }
     }

@@ -41,6 +41,9 @@ pub fn cubic_kernel(s: f64) -> (f64, f64) {
     }
 }
 
+/// Stencil nodes per axis at most (support ã ≤ 8).
+const MAX_WIDTH: usize = 17;
+
 /// RK shape function of basis order `order` and normalized support `support` (`ã`).
 #[derive(Debug, Clone)]
 pub struct ReproducingKernel<const D: usize> {
@@ -160,32 +163,36 @@ impl<const D: usize> ReproducingKernel<D> {
         mut f: impl FnMut([i64; D], &Vector<D>, f64, &Vector<D>),
     ) {
         let w = self.width;
+        // 1D offsets z and kernel values per axis, then their tensor product.
         let mut first = [0i64; D];
+        let mut z1 = [[0.0; MAX_WIDTH]; D];
+        let mut k1 = [[(0.0, 0.0); MAX_WIDTH]; D];
         for a in 0..D {
             first[a] = self.first_node(xi[a]);
+            for k in 0..w {
+                z1[a][k] = (xi[a] - (first[a] + k as i64) as f64) / self.support;
+                k1[a][k] = cubic_kernel(z1[a][k]);
+            }
         }
         let mut k = [0usize; D];
         for _ in 0..w.pow(D as u32) {
-            let mut idx = [0i64; D];
-            let mut z = Vector::<D>::zeros();
-            let mut w1 = [(0.0, 0.0); D];
+            let mut phi = 1.0;
             for a in 0..D {
-                idx[a] = first[a] + k[a] as i64;
-                z[a] = (xi[a] - idx[a] as f64) / self.support;
-                w1[a] = cubic_kernel(z[a]);
+                phi *= k1[a][k[a]].0;
             }
-            let phi: f64 = w1.iter().map(|p| p.0).product();
             if phi > 0.0 {
+                let idx: [i64; D] = std::array::from_fn(|a| first[a] + k[a] as i64);
+                let z = Vector::<D>::from_fn(|a, _| z1[a][k[a]]);
                 let dphi = Vector::<D>::from_fn(|a, _| {
-                    (0..D)
-                        .map(|b| {
-                            if a == b {
-                                w1[b].1 / self.support
-                            } else {
-                                w1[b].0
-                            }
-                        })
-                        .product()
+                    let mut d = 1.0;
+                    for b in 0..D {
+                        d *= if a == b {
+                            k1[b][k[b]].1 / self.support
+                        } else {
+                            k1[b][k[b]].0
+                        };
+                    }
+                    d
                 });
                 f(idx, &z, phi, &dphi);
             }
@@ -202,11 +209,6 @@ impl<const D: usize> ReproducingKernel<D> {
     /// `H(z)`: the monomials at `z`.
     fn basis(&self, z: &Vector<D>, h: &mut DVector<f64>) {
         self.basis.values(z, h.as_mut_slice());
-    }
-
-    /// `∂H/∂z_k`.
-    fn basis_derivative(&self, z: &Vector<D>, k: usize, dh: &mut DVector<f64>) {
-        self.basis.derivatives(z, k, dh.as_mut_slice());
     }
 }
 
@@ -262,53 +264,179 @@ impl<const D: usize> ShapeFunction<D> for ReproducingKernel<D> {
     ) {
         let xi = grid.to_cell_units(x);
         let m = self.basis_len();
-        // Derivatives in ξ (cell units) first; divided by h at the end.
-        let mut mm = DMatrix::<f64>::zeros(m, m);
-        let mut dmm = vec![DMatrix::<f64>::zeros(m, m); D];
-        let mut h = DVector::<f64>::zeros(m);
-        let mut dh = DVector::<f64>::zeros(m);
-        self.for_each_node(&xi, |_, z, phi, dphi| {
-            self.basis(z, &mut h);
-            mm.ger(phi, &h, &h, 1.0);
+        let inv_a = 1.0 / self.support;
+        let inv_h = 1.0 / grid.cell_size;
+        SCRATCH.with(|cell| {
+            let mut guard = cell.borrow_mut();
+            let sc = &mut *guard;
+            sc.prepare(m, D, nodes.len());
+            // Pass 1: the kernel nodes with their H(z), ∂H/∂z_k, φ and ∂φ/∂ξ (cell units), and
+            // the moment matrix M = Σ φ H Hᵀ (upper triangle, then mirrored).
+            let mut count = 0;
+            self.for_each_node(&xi, |idx, z, phi, dphi| {
+                let h = &mut sc.h[count * m..(count + 1) * m];
+                self.basis.values(z, h);
+                for k in 0..D {
+                    let dh = &mut sc.dh[(count * D + k) * m..(count * D + k + 1) * m];
+                    self.basis.derivatives(z, k, dh);
+                }
+                for (i, row) in sc.moment.chunks_exact_mut(m).enumerate() {
+                    let phi_hi = phi * h[i];
+                    for (mij, hj) in row[i..].iter_mut().zip(&h[i..]) {
+                        *mij += phi_hi * hj;
+                    }
+                }
+                sc.phi[count] = phi;
+                sc.dphi[count * D..(count + 1) * D].copy_from_slice(dphi.as_slice());
+                nodes[count] = grid.node_index(idx);
+                count += 1;
+            });
+            for i in 0..m {
+                for j in 0..i {
+                    sc.moment[i * m + j] = sc.moment[j * m + i];
+                }
+            }
+            if !cholesky_in_place(&mut sc.moment, m) {
+                // Cannot happen for a support that passed the check in `new`; NaN makes the step
+                // fail.
+                values.fill(f64::NAN);
+                gradients.fill(Vector::from_element(f64::NAN));
+                nodes.fill(grid.node_index(grid.node_multi_index(0)));
+                return;
+            }
+            // b = M⁻¹ H(0); ∂_k b = −M⁻¹ (∂_k M) b with
+            // (∂_k M) b = Σ [∂_k φ H (H·b) + φ/ã (∂H/∂z_k (H·b) + H (∂H/∂z_k · b))].
+            let (b, db) = (&mut sc.b, &mut sc.db);
+            b[0] = 1.0;
+            cholesky_solve(&sc.moment, m, b);
+            for i in 0..count {
+                let h = &sc.h[i * m..(i + 1) * m];
+                let hb = dot(h, b);
+                sc.hb[i] = hb;
+                for k in 0..D {
+                    let dh = &sc.dh[(i * D + k) * m..(i * D + k + 1) * m];
+                    let dhb = dot(dh, b);
+                    sc.dhb[i * D + k] = dhb;
+                    let (phi, dphi) = (sc.phi[i], sc.dphi[i * D + k]);
+                    let out = &mut db[k * m..(k + 1) * m];
+                    for j in 0..m {
+                        out[j] -= dphi * h[j] * hb + phi * inv_a * (dh[j] * hb + h[j] * dhb);
+                    }
+                }
+            }
             for k in 0..D {
-                self.basis_derivative(z, k, &mut dh);
-                // ∂_k H = (1/ã) ∂H/∂z_k in cell units.
-                let s = phi / self.support;
-                dmm[k].ger(s, &dh, &h, 1.0);
-                dmm[k].ger(s, &h, &dh, 1.0);
-                dmm[k].ger(dphi[k], &h, &h, 1.0);
+                cholesky_solve(&sc.moment, m, &mut db[k * m..(k + 1) * m]);
+            }
+            // Pass 2: Ψ_I = φ (b·H), ∂_k Ψ_I = (φ (∂_k b·H) + φ/ã (b·∂H/∂z_k) + ∂_k φ (b·H)) / h.
+            for i in 0..count {
+                let h = &sc.h[i * m..(i + 1) * m];
+                let (phi, hb) = (sc.phi[i], sc.hb[i]);
+                values[i] = hb * phi;
+                gradients[i] = Vector::<D>::from_fn(|k, _| {
+                    let dbh = dot(&db[k * m..(k + 1) * m], h);
+                    (dbh * phi + sc.dhb[i * D + k] * inv_a * phi + hb * sc.dphi[i * D + k]) * inv_h
+                });
+            }
+            // Every slot gets a node; slots past the nonzero ones repeat a valid node with zero
+            // weight.
+            for k in count..nodes.len() {
+                nodes[k] = nodes[0];
+                values[k] = 0.0;
+                gradients[k] = Vector::zeros();
             }
         });
-        let Some(chol) = mm.cholesky() else {
-            // Cannot happen for a support that passed the check in `new`; NaN makes the step fail.
-            values.fill(f64::NAN);
-            gradients.fill(Vector::from_element(f64::NAN));
-            nodes.fill(grid.node_index(grid.node_multi_index(0)));
-            return;
-        };
-        let mut h0 = DVector::<f64>::zeros(m);
-        h0[0] = 1.0;
-        let b = chol.solve(&h0);
-        let db: Vec<DVector<f64>> = (0..D).map(|k| -chol.solve(&(&dmm[k] * &b))).collect();
+    }
+}
 
-        // Every slot gets a node; slots past the nonzero ones repeat a valid node with zero weight.
-        let mut s = 0;
-        let inv_h = 1.0 / grid.cell_size;
-        self.for_each_node(&xi, |idx, z, phi, dphi| {
-            self.basis(z, &mut h);
-            let bh = b.dot(&h);
-            nodes[s] = grid.node_index(idx);
-            values[s] = bh * phi;
-            gradients[s] = Vector::<D>::from_fn(|k, _| {
-                self.basis_derivative(z, k, &mut dh);
-                (db[k].dot(&h) * phi + b.dot(&dh) / self.support * phi + bh * dphi[k]) * inv_h
-            });
-            s += 1;
-        });
-        for k in s..nodes.len() {
-            nodes[k] = nodes[0];
-            values[k] = 0.0;
-            gradients[k] = Vector::zeros();
+/// Per-thread scratch of [`ReproducingKernel::evaluate`], so that evaluating a point allocates
+/// nothing once a thread has seen the largest stencil.
+#[derive(Default)]
+struct Scratch {
+    moment: Vec<f64>,
+    b: Vec<f64>,
+    /// `∂_k b`, `D` blocks of `m`.
+    db: Vec<f64>,
+    /// Per kernel node: `H` (m), `∂H/∂z_k` (D × m), `φ`, `∂φ/∂ξ` (D), `H·b`, `∂H/∂z_k · b` (D).
+    h: Vec<f64>,
+    dh: Vec<f64>,
+    phi: Vec<f64>,
+    dphi: Vec<f64>,
+    hb: Vec<f64>,
+    dhb: Vec<f64>,
+}
+
+impl Scratch {
+    /// Sizes and zeroes the sums for `m` monomials, dimension `d` and `n` stencil nodes.
+    fn prepare(&mut self, m: usize, d: usize, n: usize) {
+        let zeroed = |v: &mut Vec<f64>, len: usize| {
+            v.clear();
+            v.resize(len, 0.0);
+        };
+        zeroed(&mut self.moment, m * m);
+        zeroed(&mut self.b, m);
+        zeroed(&mut self.db, d * m);
+        for (v, len) in [
+            (&mut self.h, n * m),
+            (&mut self.dh, n * d * m),
+            (&mut self.phi, n),
+            (&mut self.dphi, n * d),
+            (&mut self.hb, n),
+            (&mut self.dhb, n * d),
+        ] {
+            if v.len() < len {
+                v.resize(len, 0.0);
+            }
         }
+    }
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Cholesky factorization `A = L Lᵀ` of the symmetric `m × m` row-major `a`, in place (`L` in
+/// the lower triangle). False when `A` is not positive definite.
+fn cholesky_in_place(a: &mut [f64], m: usize) -> bool {
+    for j in 0..m {
+        let mut d = a[j * m + j];
+        for k in 0..j {
+            d -= a[j * m + k] * a[j * m + k];
+        }
+        if d.is_nan() || d <= 0.0 {
+            return false;
+        }
+        let l = d.sqrt();
+        a[j * m + j] = l;
+        for i in j + 1..m {
+            let mut s = a[i * m + j];
+            for k in 0..j {
+                s -= a[i * m + k] * a[j * m + k];
+            }
+            a[i * m + j] = s / l;
+        }
+    }
+    true
+}
+
+/// Solves `L Lᵀ x = r` in place with the factor of [`cholesky_in_place`].
+fn cholesky_solve(l: &[f64], m: usize, r: &mut [f64]) {
+    for i in 0..m {
+        let mut s = r[i];
+        for k in 0..i {
+            s -= l[i * m + k] * r[k];
+        }
+        r[i] = s / l[i * m + i];
+    }
+    for i in (0..m).rev() {
+        let mut s = r[i];
+        for k in i + 1..m {
+            s -= l[k * m + i] * r[k];
+        }
+        r[i] = s / l[i * m + i];
     }
 }
