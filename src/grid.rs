@@ -233,6 +233,27 @@ impl<const D: usize> GridNodes<D> {
         Ok(())
     }
 
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        let v = std::mem::size_of::<Vector<D>>();
+        let lumping = self.lumping.as_ref().map_or(0, |l| {
+            (l.mass.capacity() + l.blend.capacity()) * 8
+                + (l.momentum.capacity() + l.body_force.capacity()) * v
+        });
+        self.mass.capacity() * 8
+            + (self.momentum.capacity()
+                + self.force.capacity()
+                + self.velocity_old.capacity()
+                + self.velocity.capacity()
+                + self.mass_gradient.capacity()
+                + self.body_force.capacity())
+                * v
+            + lumping
+            + self.touched.capacity()
+            + self.slot.capacity() * 4
+            + self.active.capacity() * std::mem::size_of::<usize>()
+    }
+
     /// Whether node `n` was written this step.
     #[inline]
     pub fn is_touched(&self, n: usize) -> bool {

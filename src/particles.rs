@@ -112,6 +112,22 @@ impl<const D: usize> Particles<D> {
         self.position.is_empty()
     }
 
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        let (v, m) = (size_of::<Vector<D>>(), size_of::<Matrix<D>>());
+        (self.position.capacity() + self.reference_position.capacity() + self.velocity.capacity())
+            * v
+            + (self.deformation_gradient.capacity()
+                + self.stress.capacity()
+                + self.affine.capacity())
+                * m
+            + (self.reference_volume.capacity() + self.mass.capacity() + self.pressure.capacity())
+                * 8
+            + self.material.capacity() * 4
+            + self.plastic.capacity() * size_of::<PlasticState>()
+    }
+
     /// Current volume of particle `p`.
     pub fn volume(&self, p: usize) -> f64 {
         crate::determinant(&self.deformation_gradient[p]) * self.reference_volume[p]

@@ -151,6 +151,28 @@ impl<const D: usize> Sim<D> {
         self.work.times
     }
 
+    /// Bytes this simulation holds: particles, per-particle step storage and grid nodes (see
+    /// `BENCHMARKS.md` for the figures).
+    pub fn memory(&self) -> crate::step::MemoryUse {
+        use crate::step::profile_bytes as bytes;
+        let w = &self.work;
+        crate::step::MemoryUse {
+            particles: self.particles.bytes(),
+            particle_workspace: w.stencils.bytes()
+                + w.linear.bytes()
+                + w.quadratic.bytes()
+                + w.cubic.bytes()
+                + w.bins.bytes()
+                + bytes(&w.volumes)
+                + bytes(&w.updates)
+                + bytes(&w.admissible),
+            grid: w.nodes.bytes() + w.bodies.iter().map(|b| b.bytes()).sum::<usize>(),
+            active_nodes: w.active_nodes,
+            particle_count: self.particles.len(),
+            node_count: self.grid.node_count(),
+        }
+    }
+
     /// Stores the stencils of B-splines node by node, as RK's, instead of as 1D factors (the
     /// results are the same bits; benchmarks and tests compare the two).
     #[doc(hidden)]

@@ -14,9 +14,14 @@
 //! steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
 //! `--header` (print the CSV header first), `--phases` (time per phase on stderr),
-//! `--stored-stencils` (B-spline stencils stored node by node, as before the 1D factors). A step the engine rejects (an inverted particle, say)
-//! ends the timing: the line reports the steps before it (at least `--min-steps`) and the error
-//! goes to stderr.
+//! `--stored-stencils` (B-spline stencils stored node by node, as before the 1D factors),
+//! `--transfer apic|pic|flip`, `--gravity` (−9.81 m/s² along the last axis),
+//! `--material neo-hookean|drucker-prager` (Drucker–Prager with a cohesion so high that the
+//! block stays elastic, so the return mapping runs and finds nothing), `--padding CELLS` (that
+//! many more empty cells on every side), `--memory` (bytes per particle and per node on
+//! stderr); the defaults are the benchmark block below. A step the
+//! engine rejects (an inverted particle, say) ends the timing: the line reports the steps before
+//! it (at least `--min-steps`) and the error goes to stderr.
 //!
 //! The benchmark block (shared with the peers, keep in sync):
 //! - m particles per direction (m even, m^D ≈ N), 2 per cell per direction, so the block is
@@ -57,6 +62,11 @@ struct Args {
     header: bool,
     phases: bool,
     stored: bool,
+    transfer: Option<String>,
+    gravity: bool,
+    material: String,
+    padding: usize,
+    memory: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -72,6 +82,11 @@ fn parse() -> Result<Args, String> {
         header: false,
         phases: false,
         stored: false,
+        transfer: None,
+        gravity: false,
+        material: "neo-hookean".into(),
+        padding: 0,
+        memory: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -94,11 +109,18 @@ fn parse() -> Result<Args, String> {
             "--header" => a.header = true,
             "--phases" => a.phases = true,
             "--stored-stencils" => a.stored = true,
+            "--transfer" => a.transfer = Some(val()?),
+            "--gravity" => a.gravity = true,
+            "--memory" => a.memory = true,
+            "--material" => a.material = val()?,
+            "--padding" => a.padding = val()?.parse().map_err(|e| format!("--padding: {e}"))?,
             "-h" | "--help" => {
                 return Err(
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
-                     [--min-steps K] [--header] [--phases] [--stored-stencils]"
+                     [--min-steps K] [--header] [--phases] [--stored-stencils] \
+                     [--transfer apic|pic|flip] [--gravity] [--material neo-hookean|drucker-prager] \
+                     [--padding CELLS] [--memory]"
                         .into(),
                 )
             }
@@ -142,9 +164,16 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         ),
         m => return Err(format!("unknown method {m}")),
     };
+    let transfer = match a.transfer.as_deref() {
+        None => transfer,
+        Some("apic") => Transfer::Apic,
+        Some("pic") => Transfer::PicFlip { flip: 0.0 },
+        Some("flip") => Transfer::PicFlip { flip: 0.99 },
+        Some(t) => return Err(format!("unknown transfer {t}")),
+    };
     let m = per_direction(a.particles, D);
     let b = m / 2;
-    let g = 4 + m / 16;
+    let g = 4 + m / 16 + a.padding;
     let n = b + 2 * g;
     let h = 1.0 / n as f64;
     let mu = YOUNG / (2.0 * (1.0 + POISSON));
@@ -160,7 +189,20 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         sim.set_integration(Integration::Vc { order: vc_order })
             .map_err(e)?;
     }
-    let mat = sim.add_material(Material::neo_hookean(DENSITY, YOUNG, POISSON).map_err(e)?);
+    let material = match a.material.as_str() {
+        "neo-hookean" => Material::neo_hookean(DENSITY, YOUNG, POISSON),
+        // Drucker–Prager with a cohesion so high that the block stays elastic: the return
+        // mapping runs (and finds nothing to return).
+        "drucker-prager" => Material::drucker_prager(DENSITY, YOUNG, POISSON, 30.0, 1e12, 0.0),
+        m => return Err(format!("unknown material {m}")),
+    }
+    .map_err(e)?;
+    let mat = sim.add_material(material);
+    if a.gravity {
+        let mut g = Vector::<D>::zeros();
+        g[D - 1] = -9.81;
+        sim.set_gravity(g).map_err(e)?;
+    }
     let total = m.pow(D as u32);
     let mut x = Vec::with_capacity(total);
     let mut v = Vec::with_capacity(total);
@@ -227,6 +269,22 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
                 100.0 * (t - b) / sum
             );
         }
+    }
+    if a.memory {
+        let m = sim.memory();
+        eprintln!(
+            "memory: particles {:.0} B + step workspace {:.0} B = {:.0} B per particle; grid {:.0} B \
+             per stored node ({} nodes, {:.1} MB; {} active, {:.0} B per active node); total {:.2} GB",
+            m.particles as f64 / m.particle_count as f64,
+            m.particle_workspace as f64 / m.particle_count as f64,
+            m.bytes_per_particle(),
+            m.bytes_per_node(),
+            m.node_count,
+            m.grid as f64 / 1e6,
+            m.active_nodes,
+            m.grid as f64 / m.active_nodes.max(1) as f64,
+            (m.particles + m.particle_workspace + m.grid) as f64 / 1e9
+        );
     }
     let ps = sim.particles();
     let ke: f64 = ps

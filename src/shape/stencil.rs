@@ -114,10 +114,11 @@ impl<const D: usize> Stencils<D> {
         )
     }
 
-    /// Bytes stored per particle.
-    pub fn bytes_per_particle(&self) -> usize {
-        let lumping = if self.lumping.is_empty() { 0 } else { 8 };
-        self.len * (std::mem::size_of::<usize>() + 8 + 8 * D + lumping)
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.nodes.capacity() * std::mem::size_of::<usize>()
+            + (self.values.capacity() + self.lumping.capacity()) * 8
+            + self.gradients.capacity() * std::mem::size_of::<Vector<D>>()
     }
 }
 
@@ -211,9 +212,11 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             });
     }
 
-    /// Bytes stored per particle.
-    pub const fn bytes_per_particle() -> usize {
-        8 * D + std::mem::size_of::<usize>() + 2 * 8 * D * W
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        self.first.capacity() * 8 * D
+            + self.base.capacity() * std::mem::size_of::<usize>()
+            + (self.values.capacity() + self.derivatives.capacity()) * 8 * D * W
     }
 }
 

@@ -147,6 +147,15 @@ impl<const D: usize> Bins<D> {
         );
     }
 
+    /// Bytes allocated per particle (keys and order) and per block (counts and marks).
+    pub fn bytes(&self) -> usize {
+        (self.keys.capacity() + self.order.capacity() + self.counts.capacity()) * 4
+            + self.marks.capacity()
+            + self.occupied.capacity() * std::mem::size_of::<(u32, std::ops::Range<usize>)>()
+            + self.node_blocks.capacity() * 4
+            + self.colours.iter().map(|c| c.capacity() * 4).sum::<usize>()
+    }
+
     /// Block coordinates of block `key`.
     fn coords(&self, mut key: usize) -> [usize; D] {
         std::array::from_fn(|a| {

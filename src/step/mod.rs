@@ -17,8 +17,9 @@ mod grid_update;
 mod particle_to_grid;
 mod profile;
 mod timestep;
+pub(crate) use profile::bytes as profile_bytes;
 use profile::lap;
-pub use profile::PhaseTimes;
+pub use profile::{MemoryUse, PhaseTimes};
 pub use timestep::Progress;
 
 pub use bins::Bins;
@@ -51,6 +52,8 @@ pub struct Workspace<const D: usize> {
     pub stored_stencils: bool,
     /// Time per phase, summed over the steps.
     pub times: PhaseTimes,
+    /// Nodes written by the last step.
+    pub active_nodes: usize,
     pub boundary_stencils: Stencils<D>,
     /// Current particle volumes (for VC).
     pub volumes: Vec<f64>,
@@ -146,6 +149,7 @@ impl<const D: usize> Sim<D> {
         }
         let result = self.compute_step(dt);
         let mut clock = std::time::Instant::now();
+        self.work.active_nodes = self.work.nodes.active.len();
         self.work.nodes.reset();
         for b in self.work.bodies.iter_mut() {
             b.reset();

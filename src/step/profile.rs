@@ -52,3 +52,35 @@ pub(crate) fn lap(clock: &mut Instant) -> f64 {
     *clock = now;
     dt
 }
+
+/// Bytes a simulation holds, by part (capacities of its arrays).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub struct MemoryUse {
+    pub particles: usize,
+    /// Per-particle step storage: stencils, the new state being built, bins, volumes.
+    pub particle_workspace: usize,
+    /// Node storage (dense over the grid, ghost layers included; a step touches only the
+    /// active nodes).
+    pub grid: usize,
+    /// Nodes written by the last step.
+    pub active_nodes: usize,
+    pub particle_count: usize,
+    pub node_count: usize,
+}
+
+impl MemoryUse {
+    /// Particle storage and particle workspace per particle.
+    pub fn bytes_per_particle(&self) -> f64 {
+        (self.particles + self.particle_workspace) as f64 / self.particle_count.max(1) as f64
+    }
+
+    /// Node storage per stored node.
+    pub fn bytes_per_node(&self) -> f64 {
+        self.grid as f64 / self.node_count.max(1) as f64
+    }
+}
+
+/// Bytes of a vector's allocation.
+pub(crate) fn bytes<T>(v: &Vec<T>) -> usize {
+    v.capacity() * std::mem::size_of::<T>()
+}
