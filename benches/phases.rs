@@ -162,6 +162,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
             nodes.reset();
             vc.compute(
                 &grid,
+                &bins,
                 &ps.position,
                 &volumes,
                 &stored,

@@ -397,6 +397,39 @@ impl<'a, const D: usize> NodeScatter<'a, D> {
     }
 }
 
+/// Write access to disjoint parts of one slice from several threads (per-node storage of the
+/// coloured sums); the caller guarantees that no two threads touch the same element.
+pub struct SharedSlice<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _slice: std::marker::PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: see the type's documentation; every access goes through `range`, whose callers
+// guarantee disjointness.
+unsafe impl<T: Send> Sync for SharedSlice<'_, T> {}
+
+impl<'a, T> SharedSlice<'a, T> {
+    pub fn new(slice: &'a mut [T]) -> Self {
+        SharedSlice {
+            ptr: slice.as_mut_ptr(),
+            len: slice.len(),
+            _slice: std::marker::PhantomData,
+        }
+    }
+
+    /// The elements `start .. start + len`.
+    ///
+    /// # Safety
+    /// No other thread accesses these elements while the returned slice lives.
+    #[allow(clippy::mut_from_ref)]
+    #[inline(always)]
+    pub unsafe fn range(&self, start: usize, len: usize) -> &mut [T] {
+        assert!(start + len <= self.len);
+        std::slice::from_raw_parts_mut(self.ptr.add(start), len)
+    }
+}
+
 /// `*field[n] += value` for a field pointer of a [`NodeScatter`].
 ///
 /// # Safety

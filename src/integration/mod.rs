@@ -20,15 +20,20 @@ pub mod boundary_points;
 pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
-use crate::grid::{Grid, GridNodes};
-use crate::shape::{Monomials, Stencils};
+use crate::grid::{Grid, GridNodes, NodeScatter, SharedSlice};
+use crate::shape::{Monomials, StencilNode, StencilView, Stencils};
+use crate::step::Bins;
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// A node's order-`n` correction needs its particle moment matrix `A_I = Σ V_p Q Qᵀ` to be well
 /// conditioned; below this smallest-to-largest eigenvalue ratio (a node whose support holds only
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
+
+/// Test polynomials at most (order 4 in 3D: the monomials of degree ≤ 3).
+const MAX_BASIS: usize = 20;
 
 /// The per-node gradient corrections of one step.
 #[derive(Debug, Clone)]
@@ -83,10 +88,15 @@ impl<const D: usize> VcCorrection<D> {
     /// Computes `ξ_I` for every node touched by a particle: the particle sums over their
     /// stencils, the boundary sums over the stencils of the boundary points. Marks the nodes
     /// active in `nodes`.
+    ///
+    /// The particle sums run in parallel by the colours of `bins` (the particles of `positions`
+    /// binned for this step), the per-node solves in parallel: the same bits with any number of
+    /// threads.
     #[allow(clippy::too_many_arguments)]
     pub fn compute(
         &mut self,
         grid: &Grid<D>,
+        bins: &Bins<D>,
         positions: &[Vector<D>],
         volumes: &[f64],
         stencils: &Stencils<D>,
@@ -96,36 +106,96 @@ impl<const D: usize> VcCorrection<D> {
     ) {
         let m = self.m();
         let h = grid.cell_size;
-        let mut q = vec![0.0; m];
-        let mut dq = vec![0.0; m * D];
-        // Particle sums: A_I += V Q Qᵀ; rhs_Ik −= V (∂_k Ψ Q + Ψ ∂_k Q).
-        for p in 0..positions.len() {
-            let (ns, ws, gs) = stencils.of(p);
-            let v = volumes[p];
-            for s in 0..ns.len() {
-                if ws[s] == 0.0 && gs[s] == Vector::<D>::zeros() {
-                    continue;
-                }
-                let n = ns[s];
-                let slot = self.slot_for(nodes, n, m);
-                let z = (positions[p] - grid.node_position(grid.node_multi_index(n))) / h;
-                self.basis_at(&z, &mut q, Some(&mut dq));
-                let a = &mut self.moment[slot * m * m..(slot + 1) * m * m];
-                for i in 0..m {
-                    for j in 0..m {
-                        a[i * m + j] += v * q[i] * q[j];
+        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
+        let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
+            for colour in &bins.colours {
+                colour.par_iter().for_each(|&b| {
+                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
+                        visit(p as usize);
                     }
-                }
-                let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
-                for k in 0..D {
-                    for j in 0..m {
-                        r[k * m + j] -= v * (gs[s][k] * q[j] + ws[s] * dq[k * m + j] / h);
+                });
+            }
+        };
+        // The nodes: those of particle stencils (listed block by block), then those that only
+        // boundary points reach.
+        {
+            let out = NodeScatter::new(nodes);
+            by_colour(&|p| {
+                stencils.for_each(p, |_, s| {
+                    if in_support(&s) {
+                        // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                        unsafe { out.touch(s.node) }
                     }
+                })
+            });
+        }
+        bins.collect_active(grid, nodes);
+        for b in 0..boundary.len() {
+            let (ns, ws, _) = boundary_stencils.of(b);
+            for (&n, &w) in ns.iter().zip(ws) {
+                if w != 0.0 {
+                    nodes.touch(n);
                 }
-                self.used[slot] = true;
             }
         }
+        let slots = nodes.active.len();
+        for (v, per) in [(&mut self.moment, m * m), (&mut self.xi, m * D)] {
+            v.clear();
+            v.resize(slots * per, 0.0);
+        }
+        for v in [&mut self.used, &mut self.reduced] {
+            v.clear();
+            v.resize(slots, false);
+        }
+        // Particle sums: A_I += V Q Qᵀ; rhs_Ik −= V (∂_k Ψ Q + Ψ ∂_k Q).
+        {
+            let moment = SharedSlice::new(&mut self.moment);
+            let xi = SharedSlice::new(&mut self.xi);
+            let used = SharedSlice::new(&mut self.used);
+            let nodes = &*nodes;
+            let basis = &self.basis;
+            by_colour(&|p| {
+                let (mut q, mut dq) = ([0.0; MAX_BASIS], [0.0; 3 * MAX_BASIS]);
+                let v = volumes[p];
+                stencils.for_each(p, |_, s| {
+                    if !in_support(&s) {
+                        return;
+                    }
+                    let slot = nodes.slot(s.node);
+                    if m == 1 {
+                        // Order 1: Q = 1, ∇Q = 0 (no position needed).
+                        q[0] = 1.0;
+                    } else {
+                        let x_node = grid.node_position(grid.node_multi_index(s.node));
+                        let z = (positions[p] - x_node) / h;
+                        basis.values(&z, &mut q[..m]);
+                        for k in 0..D {
+                            basis.derivatives(&z, k, &mut dq[k * m..(k + 1) * m]);
+                        }
+                    }
+                    // SAFETY: the slot belongs to a node that only this block writes in this
+                    // colour (`Bins`); slots of different nodes are disjoint ranges.
+                    unsafe {
+                        let a = moment.range(slot * m * m, m * m);
+                        for i in 0..m {
+                            for j in 0..m {
+                                a[i * m + j] += v * q[i] * q[j];
+                            }
+                        }
+                        let r = xi.range(slot * m * D, m * D);
+                        for k in 0..D {
+                            for j in 0..m {
+                                r[k * m + j] -=
+                                    v * (s.gradient[k] * q[j] + s.value * dq[k * m + j] / h);
+                            }
+                        }
+                        used.range(slot, 1)[0] = true;
+                    }
+                });
+            });
+        }
         // Boundary sums: rhs_Ik += Ψ_I Q (n a)_k, only at nodes whose support meets a point.
+        let mut q = [0.0; MAX_BASIS];
         for b in 0..boundary.len() {
             let (ns, ws, _) = boundary_stencils.of(b);
             let na = boundary.area_normal[b];
@@ -134,7 +204,7 @@ impl<const D: usize> VcCorrection<D> {
                     continue;
                 }
                 let n = ns[s];
-                let slot = self.slot_for(nodes, n, m);
+                let slot = nodes.slot(n);
                 let z = (boundary.position[b] - grid.node_position(grid.node_multi_index(n))) / h;
                 self.basis_at(&z, &mut q, None);
                 let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
@@ -146,60 +216,40 @@ impl<const D: usize> VcCorrection<D> {
             }
         }
         // Solve A_I ξ_Ik = rhs_Ik per node.
-        for slot in 0..nodes.active.len() {
-            if !self.used[slot] {
-                continue;
-            }
-            let a = DMatrix::from_row_slice(m, m, &self.moment[slot * m * m..(slot + 1) * m * m]);
-            let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
-            // A moment matrix whose particles lie (nearly) on a lower-dimensional set cannot
-            // carry the higher constraints: relative smallest eigenvalue below [`VC_MIN_RELATIVE_EIGENVALUE`].
-            let well_posed = m > 1 && {
-                let eig = a.clone().symmetric_eigenvalues();
-                eig.min() > VC_MIN_RELATIVE_EIGENVALUE * eig.max()
-            };
-            let chol = if well_posed {
-                a.clone().cholesky()
-            } else {
-                None
-            };
-            self.reduced[slot] = m > 1 && chol.is_none();
-            for k in 0..D {
-                let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
-                match &chol {
-                    Some(c) => r[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice()),
-                    None => {
-                        // Order 1, or a singular A_I: the constant correction alone.
-                        let c0 = rhs[0] / a[(0, 0)];
-                        r[k * m..(k + 1) * m].fill(0.0);
-                        r[k * m] = c0;
+        self.moment
+            .par_chunks_exact(m * m)
+            .zip(self.xi.par_chunks_exact_mut(m * D))
+            .zip(self.used.par_iter())
+            .zip(self.reduced.par_iter_mut())
+            .filter(|((_, &used), _)| used)
+            .for_each(|(((a, r), _), reduced)| {
+                let a = DMatrix::from_row_slice(m, m, a);
+                // A moment matrix whose particles lie (nearly) on a lower-dimensional set cannot
+                // carry the higher constraints: relative smallest eigenvalue below
+                // [`VC_MIN_RELATIVE_EIGENVALUE`].
+                let well_posed = m > 1 && {
+                    let eig = a.clone().symmetric_eigenvalues();
+                    eig.min() > VC_MIN_RELATIVE_EIGENVALUE * eig.max()
+                };
+                let chol = if well_posed {
+                    a.clone().cholesky()
+                } else {
+                    None
+                };
+                *reduced = m > 1 && chol.is_none();
+                for k in 0..D {
+                    let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
+                    match &chol {
+                        Some(c) => r[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice()),
+                        None => {
+                            // Order 1, or a singular A_I: the constant correction alone.
+                            let c0 = rhs[0] / a[(0, 0)];
+                            r[k * m..(k + 1) * m].fill(0.0);
+                            r[k * m] = c0;
+                        }
                     }
                 }
-            }
-        }
-    }
-
-    /// The slot of node `n`, growing and zeroing the per-slot storage for a new one.
-    fn slot_for(&mut self, nodes: &mut GridNodes<D>, n: usize, m: usize) -> usize {
-        let fresh = nodes.active.len();
-        let slot = nodes.touch(n);
-        if slot == fresh {
-            let (mm, md) = (m * m, m * D);
-            for (v, per) in [(&mut self.moment, mm), (&mut self.xi, md)] {
-                let end = (slot + 1) * per;
-                if v.len() < end {
-                    v.resize(end, 0.0);
-                }
-                v[slot * per..end].fill(0.0);
-            }
-            if self.used.len() <= slot {
-                self.used.resize(slot + 1, false);
-                self.reduced.resize(slot + 1, false);
-            }
-            self.used[slot] = false;
-            self.reduced[slot] = false;
-        }
-        slot
+            });
     }
 
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.

@@ -51,6 +51,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
     work.nodes.ensure(&grid, false, false, false).unwrap();
     work.stencils
         .compute(sim.shape.as_ref(), &grid, &ps.position);
+    work.bins.compute(sim.shape.as_ref(), &grid, &ps.position);
     work.boundary_stencils
         .compute(sim.shape.as_ref(), &grid, &sim.boundary.position);
     let volumes: Vec<f64> = (0..ps.len()).map(|p| ps.volume(p)).collect();
@@ -58,6 +59,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
         let mut vc = VcCorrection::<D>::new(o).unwrap();
         vc.compute(
             &grid,
+            &work.bins,
             &ps.position,
             &volumes,
             &work.stencils,

@@ -347,6 +347,7 @@ impl<const D: usize> Sim<D> {
             work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
             vc.compute(
                 grid,
+                &work.bins,
                 &ps.position,
                 &work.volumes,
                 stored.expect("VC runs with stored stencils"),
