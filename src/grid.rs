@@ -293,27 +293,56 @@ impl<const D: usize> GridNodes<D> {
 
     /// Zeroes the nodes written this step, and only those.
     pub fn reset(&mut self) {
-        for &n in &self.active {
-            self.mass[n] = 0.0;
-            self.momentum[n] = Vector::zeros();
-            self.force[n] = Vector::zeros();
-            self.velocity_old[n] = Vector::zeros();
-            self.velocity[n] = Vector::zeros();
-            self.touched[n] = false;
-            if !self.mass_gradient.is_empty() {
-                self.mass_gradient[n] = Vector::zeros();
+        use rayon::prelude::*;
+        let GridNodes {
+            mass,
+            momentum,
+            force,
+            velocity_old,
+            velocity,
+            lumping,
+            mass_gradient,
+            body_force,
+            touched,
+            active,
+            ..
+        } = self;
+        let scalars = [SharedSlice::new(mass)];
+        let vectors = [
+            momentum,
+            force,
+            velocity_old,
+            velocity,
+            mass_gradient,
+            body_force,
+        ]
+        .map(|v| SharedSlice::new(v.as_mut_slice()));
+        let touched = SharedSlice::new(touched);
+        let lumping = lumping.as_mut().map(|l| {
+            (
+                [SharedSlice::new(&mut l.mass)],
+                [&mut l.momentum, &mut l.body_force].map(|v| SharedSlice::new(v.as_mut_slice())),
+                SharedSlice::new(&mut l.blend),
+            )
+        });
+        // SAFETY: `active` lists each node once, so every node is written by one task only;
+        // empty fields (not kept) are skipped.
+        active.par_iter().for_each(|&n| unsafe {
+            let zero = |s: &[SharedSlice<'_, Vector<D>>]| {
+                s.iter()
+                    .filter(|v| !v.is_empty())
+                    .for_each(|v| *v.at(n) = Vector::zeros())
+            };
+            scalars.iter().for_each(|m| *m.at(n) = 0.0);
+            zero(&vectors);
+            *touched.at(n) = false;
+            if let Some((m, v, blend)) = &lumping {
+                *m[0].at(n) = 0.0;
+                zero(v);
+                *blend.at(n) = 1.0;
             }
-            if !self.body_force.is_empty() {
-                self.body_force[n] = Vector::zeros();
-            }
-            if let Some(l) = self.lumping.as_mut() {
-                l.mass[n] = 0.0;
-                l.momentum[n] = Vector::zeros();
-                l.body_force[n] = Vector::zeros();
-                l.blend[n] = 1.0;
-            }
-        }
-        self.active.clear();
+        });
+        active.clear();
     }
 
     /// Whether every node is zero and inactive (for tests of the reset).
@@ -418,6 +447,16 @@ impl<'a, T> SharedSlice<'a, T> {
         }
     }
 
+    /// Length of the slice.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the slice is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     /// The elements `start .. start + len`.
     ///
     /// # Safety
@@ -427,6 +466,17 @@ impl<'a, T> SharedSlice<'a, T> {
     pub unsafe fn range(&self, start: usize, len: usize) -> &mut [T] {
         assert!(start + len <= self.len);
         std::slice::from_raw_parts_mut(self.ptr.add(start), len)
+    }
+
+    /// Element `i`.
+    ///
+    /// # Safety
+    /// No other thread accesses element `i` while the returned reference lives.
+    #[allow(clippy::mut_from_ref)]
+    #[inline(always)]
+    pub unsafe fn at(&self, i: usize) -> &mut T {
+        assert!(i < self.len);
+        &mut *self.ptr.add(i)
     }
 }
 

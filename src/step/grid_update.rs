@@ -1,8 +1,9 @@
 //! Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` with the wall conditions.
 
 use crate::boundary::Walls;
-use crate::grid::{Grid, GridNodes, LumpingShift};
+use crate::grid::{Grid, GridNodes, LumpingShift, SharedSlice};
 use crate::Vector;
+use rayon::prelude::*;
 
 /// Signed shape functions and VC integration: the smallest node mass, as a fraction of the
 /// largest node mass, that a node's internal force is divided by. Nodes that barely overlap a
@@ -48,39 +49,63 @@ pub fn grid_update<const D: usize>(
         }
         _ => 0.0,
     };
-    for &n in &nodes.active {
+    // Every active node on its own, in parallel (the list holds each node once).
+    let GridNodes {
+        mass,
+        momentum,
+        force,
+        velocity_old,
+        velocity,
+        lumping,
+        body_force,
+        active,
+        ..
+    } = nodes;
+    let (mass, momentum) = (SharedSlice::new(mass), SharedSlice::new(momentum));
+    let (velocity_old, velocity) = (SharedSlice::new(velocity_old), SharedSlice::new(velocity));
+    let (force, body_force) = (&*force, &*body_force);
+    let lumping = lumping.as_mut().map(|l| {
+        (
+            SharedSlice::new(&mut l.blend),
+            &l.mass,
+            SharedSlice::new(&mut l.momentum),
+            &l.body_force,
+        )
+    });
+    active.par_iter().for_each(|&n| {
+        // SAFETY: `active` lists each node once, so every node is written by one task only.
+        let (m, p) = unsafe { (mass.at(n), momentum.at(n)) };
         // Body force apart from the internal force under lumping (it is limited by the mass
         // floor only in the internal part, so that a uniform gravity stays exact).
         let mut body = Vector::<D>::zeros();
-        if let Some(l) = nodes.lumping.as_mut() {
+        if let Some((blend, l_mass, l_momentum, l_body)) = &lumping {
+            let blend = unsafe { blend.at(n) };
             if dt.is_some() {
-                l.blend[n] = LumpingShift::<D>::blend(nodes.mass[n], nodes.mass[n] + l.mass[n]);
+                *blend = LumpingShift::<D>::blend(*m, *m + l_mass[n]);
             }
-            let rest = 1.0 - l.blend[n];
-            nodes.momentum[n] += rest * l.momentum[n];
+            let rest = 1.0 - *blend;
+            *p += rest * unsafe { *l_momentum.at(n) };
             if dt.is_some() {
-                nodes.mass[n] += rest * l.mass[n];
-                body = nodes.body_force[n] + rest * l.body_force[n];
+                *m += rest * l_mass[n];
+                body = body_force[n] + rest * l_body[n];
             }
-        } else if dt.is_some() && !nodes.body_force.is_empty() {
-            body = nodes.body_force[n];
+        } else if dt.is_some() && !body_force.is_empty() {
+            body = body_force[n];
         }
-        let m = nodes.mass[n];
-        if m <= mass_floor {
-            nodes.velocity[n] = Vector::zeros();
-            nodes.velocity_old[n] = Vector::zeros();
-            continue;
+        let (v_old, v) = unsafe { (velocity_old.at(n), velocity.at(n)) };
+        if *m <= mass_floor {
+            *v = Vector::zeros();
+            *v_old = Vector::zeros();
+            return;
         }
-        let p = nodes.momentum[n];
         match dt {
             Some(dt) => {
-                nodes.velocity_old[n] = p / m;
-                nodes.velocity[n] =
-                    (p + dt * body) / m + dt * nodes.force[n] / m.max(force_mass_floor);
+                *v_old = *p / *m;
+                *v = (*p + dt * body) / *m + dt * force[n] / m.max(force_mass_floor);
             }
-            None => nodes.velocity[n] = p / m,
+            None => *v = *p / *m,
         }
-    }
+    });
     walls.apply_friction(grid, nodes);
     walls.unfold(grid, nodes);
 }
