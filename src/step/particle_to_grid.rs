@@ -75,57 +75,58 @@ pub fn particle_to_grid<const D: usize, S, A>(
             };
             (-ps.volume(p) * ps.stress[p], b)
         });
-        stencils.for_each(
-            p,
-            |s,
-             StencilNode {
-                 node: n,
-                 value: w,
-                 gradient: g,
-             }| {
-                let shift = lumping.map_or(0.0, |l| l[s] - w);
-                if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
-                    return;
+        // Momentum of the particle and its affine part, `m v + m C (x_I − x_p)`.
+        let mv = m * v;
+        let mc = c.map(|c| m * c);
+        let node_sums = |s: usize, node: StencilNode<D>, offset: Vector<D>| {
+            let StencilNode {
+                node: n,
+                value: w,
+                gradient: g,
+            } = node;
+            let shift = lumping.map_or(0.0, |l| l[s] - w);
+            if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
+                return;
+            }
+            // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
+            // one colour at a time.
+            unsafe {
+                out.touch(n);
+                let mut momentum = mv;
+                if let Some(mc) = mc {
+                    momentum += mc * offset;
                 }
-                // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
-                // one colour at a time.
-                unsafe {
-                    out.touch(n);
-                    let mut mv = v;
-                    if let Some(c) = c {
-                        mv += c * stencils.offset(grid, p, s, n, &xp);
-                    }
-                    scatter_add(out.momentum, n, (m * w) * mv);
-                    if with_lumping {
-                        scatter_add(out.lumping.1, n, (m * shift) * mv);
-                        if let Some((_, b)) = force {
-                            scatter_add(out.lumping.0, n, m * shift);
-                            if with_body_force {
-                                scatter_add(out.lumping.2, n, (m * shift) * b);
-                            }
-                        }
-                    }
-                    if let Some((vs, b)) = force {
-                        let grad = match vc {
-                            Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
-                            None => g,
-                        };
-                        scatter_add(out.mass, n, m * w);
-                        if with_gradient {
-                            scatter_add(out.mass_gradient, n, m * g);
-                        }
-                        scatter_add(out.force, n, vs * grad);
-                        if !with_body_force {
-                            // Nothing to add.
-                        } else if keep_body_force {
-                            scatter_add(out.body_force, n, (m * w) * b);
-                        } else {
-                            scatter_add(out.force, n, (m * w) * b);
+                scatter_add(out.momentum, n, w * momentum);
+                if with_lumping {
+                    scatter_add(out.lumping.1, n, shift * momentum);
+                    if let Some((_, b)) = force {
+                        scatter_add(out.lumping.0, n, m * shift);
+                        if with_body_force {
+                            scatter_add(out.lumping.2, n, (m * shift) * b);
                         }
                     }
                 }
-            },
-        );
+                if let Some((vs, b)) = force {
+                    let grad = match vc {
+                        Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
+                        None => g,
+                    };
+                    scatter_add(out.mass, n, m * w);
+                    if with_gradient {
+                        scatter_add(out.mass_gradient, n, m * g);
+                    }
+                    scatter_add(out.force, n, vs * grad);
+                    if !with_body_force {
+                        // Nothing to add.
+                    } else if keep_body_force {
+                        scatter_add(out.body_force, n, (m * w) * b);
+                    } else {
+                        scatter_add(out.force, n, (m * w) * b);
+                    }
+                }
+            }
+        };
+        stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
     };
     for colour in &bins.colours {
         colour.par_iter().for_each(|&b| {
