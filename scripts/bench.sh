@@ -7,7 +7,7 @@
 #
 # Makes a venv in build/bench-venv with pinned warp-lang, taichi and numpy from PyPI (CPython 3.11),
 # builds examples/rust/throughput.rs in release (CARGO_TARGET_DIR, default /tmp/bench-target),
-# runs bench/run_matrix.py and writes build/bench-results[-quick].csv and .md. Timings are noisy
+# runs bench/run_matrix.py and bench/skips.py (what each skip saves) and writes build/bench-results[-quick].csv and .md. Timings are noisy
 # when other work runs on the machine: compare ratios within one run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -52,4 +52,6 @@ OUT="build/bench-results$SUFFIX.csv"
     [ "$PEERS" = 1 ] && echo "python: $("$PY" --version), $("$PY" -m pip list 2>/dev/null | grep -iE '^(warp-lang|taichi|numpy) ' | tr -s ' ' | paste -sd, -)"
     echo "cpu: $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores; $(lscpu | grep -o 'avx512f' | head -1 || true)"
     "$PY" bench/run_matrix.py --example "$EXAMPLE" --python "$PY" --out "$OUT" "${QUICK[@]}" "${EXTRA[@]}"
+    echo
+    python3 bench/skips.py --example "$EXAMPLE" "${QUICK[@]}"
 } 2>&1 | tee "build/bench-results$SUFFIX.md"
