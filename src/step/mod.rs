@@ -1,15 +1,22 @@
 //! One explicit MPM step (METHOD.md section 1), phase by phase:
 //!
-//! 1. shape functions of every particle ([`crate::shape::Stencils::compute`]), once per step;
-//! 2. body forces (the callback, once per step with whole arrays);
+//! 0. particles binned by grid block and the blocks coloured ([`Bins`]), for the lock-free,
+//!    thread-count-independent parallel maps to the grid;
+//! 1. shape functions of every particle, once per step: B-splines as 1D factors
+//!    ([`crate::shape::TensorStencils`]), RK and every shape under VC as node lists
+//!    ([`crate::shape::Stencils`]);
+//! 2. body forces (the callback, once per step with whole arrays), VC corrections;
 //! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force;
 //! 4. [`grid_update`]: velocities, wall conditions;
 //! 5. [`grid_to_particle`]: velocity (PIC/FLIP or APIC), position, velocity gradient, `F`;
-//!    under MUSL the new particle momenta are mapped to the grid again first;
-//! 6. constitutive update, then the checks; the grid is reset where it was written.
+//!    under USL each particle's constitutive update and checks follow in the same pass, while
+//!    it is in cache; under MUSL the new particle momenta are mapped to the grid again first and
+//!    the constitutive update and checks run after;
+//! 6. the grid is reset where it was written.
 //!
 //! The new particle state is built in a workspace and committed only when every particle passed
 //! the checks (finite, `det F > 0`, inside the grid), so a failed step leaves the last good state.
+//! [`PhaseTimes`] accumulates the time per phase.
 
 mod bins;
 mod grid_to_particle;
