@@ -13,7 +13,7 @@ pub struct Monomials<const D: usize> {
 }
 
 impl<const D: usize> Monomials<D> {
-    /// The monomials of degree ≤ `degree` (at most [`MAX_DEGREE`]).
+    /// The monomials of degree ≤ `degree` (at most `MAX_DEGREE` = 8).
     pub fn up_to(degree: u32) -> Self {
         assert!(
             degree as usize <= MAX_DEGREE,
