@@ -126,16 +126,6 @@ impl Material {
         }
     }
 
-    fn model(&self) -> &dyn Constitutive {
-        match self {
-            Material::Rigid(m) => m,
-            Material::LinearElastic(m) => m,
-            Material::NeoHookean(m) => m,
-            Material::DruckerPrager(m) => m,
-            Material::JohnsonCook(m) => m,
-        }
-    }
-
     /// The constitutive update of a history model over `dt`: new state and Cauchy stress after
     /// the increment `df = F^{n+1} (F^n)⁻¹`, for the new `det F = j`. Elastic models have no
     /// history and never get here (the step calls [`Constitutive::cauchy_stress`]).
@@ -215,21 +205,39 @@ impl Constitutive for DruckerPrager {
     }
 }
 
+/// Calls `$e` with `$m` bound to the model inside a [`Material`], dispatched statically so that
+/// the elastic stress of the hot loop inlines.
+macro_rules! each_model {
+    ($material:expr, $m:ident => $e:expr) => {
+        match $material {
+            Material::Rigid($m) => $e,
+            Material::LinearElastic($m) => $e,
+            Material::NeoHookean($m) => $e,
+            Material::DruckerPrager($m) => $e,
+            Material::JohnsonCook($m) => $e,
+        }
+    };
+}
+
 impl Constitutive for Material {
+    #[inline]
     fn density(&self) -> f64 {
-        self.model().density()
+        each_model!(self, m => m.density())
     }
+    #[inline]
     fn wave_speed(&self, j: f64) -> f64 {
-        self.model().wave_speed(j)
+        each_model!(self, m => m.wave_speed(j))
     }
+    #[inline]
     fn is_elastic(&self) -> bool {
-        self.model().is_elastic()
+        each_model!(self, m => m.is_elastic())
     }
+    #[inline]
     fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
-        self.model().cauchy_stress(f)
+        each_model!(self, m => m.cauchy_stress(f))
     }
     fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
-        self.model().strain_energy_density(f)
+        each_model!(self, m => m.strain_energy_density(f))
     }
 }
 
