@@ -174,7 +174,7 @@ impl<const D: usize> Sim<D> {
     }
 
     /// Stores the stencils of B-splines node by node, as RK's, instead of as 1D factors (the
-    /// results are the same bits; benchmarks and tests compare the two).
+    /// results agree to round-off; benchmarks and tests compare the two).
     #[doc(hidden)]
     pub fn set_stored_stencils(&mut self, stored: bool) {
         self.work.stored_stencils = stored;

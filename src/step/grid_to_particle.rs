@@ -5,7 +5,7 @@ use crate::error::ErrorKind;
 use crate::grid::{Grid, GridNodes};
 use crate::material::PlasticState;
 use crate::particles::Particles;
-use crate::shape::{StencilNode, StencilView};
+use crate::shape::StencilView;
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
@@ -135,23 +135,15 @@ pub fn grid_to_particle<const D: usize>(
             return;
         }
         let nodes = fields.of(p);
-        let mut v_pic = Vector::<D>::zeros();
-        let mut dv = Vector::<D>::zeros();
-        let mut b = Matrix::<D>::zeros();
-        let mut l = Matrix::<D>::zeros();
-        let mut node_sums = |_: usize, node: StencilNode<D>, offset: Vector<D>| {
-            let (n, w) = (node.node, node.value);
-            let vi = nodes.velocity[n];
-            v_pic += w * vi;
-            if flip {
-                dv += w * (vi - nodes.velocity_old[n]);
-            }
-            if apic_inertia {
-                b += (w * vi) * offset.transpose();
-            }
-            l += vi * node.gradient.transpose();
-        };
-        stencils.for_each_with_offset(grid, p, apic_inertia.then_some(&xp), &mut node_sums);
+        let g = stencils.gather(
+            grid,
+            p,
+            &xp,
+            &nodes.velocity,
+            flip.then_some(&nodes.velocity_old[..]),
+            apic_inertia,
+        );
+        let (v_pic, dv, b, l) = (g.velocity, g.velocity_change, g.affine, g.gradient);
         u.position = xp + dt * v_pic;
         u.velocity = if flip {
             (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)

@@ -10,7 +10,7 @@ use crate::grid::{scatter_add, NodeScatter};
 use crate::grid::{Grid, GridNodes};
 use crate::integration::VcCorrection;
 use crate::particles::Particles;
-use crate::shape::{StencilNode, StencilView, Stencils};
+use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils};
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
@@ -126,6 +126,21 @@ pub fn particle_to_grid<const D: usize, S, A>(
                 }
             }
         };
+        // A factored scatter when the stencils have one (B-spline factors; no VC, no lumping).
+        let input = ScatterInput {
+            position: xp,
+            mass: m,
+            momentum: mv,
+            affine: mc,
+            force,
+            with_body_force,
+            keep_body_force,
+            with_gradient,
+        };
+        // SAFETY: as above.
+        if vc.is_none() && lumping.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
+            return;
+        }
         stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
     };
     for colour in &bins.colours {

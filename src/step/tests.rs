@@ -10,6 +10,9 @@ use crate::shape::Shape;
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
 
+/// Young's modulus of the test block.
+const YOUNG: f64 = 1e5;
+
 /// A block of `n^D` particles, 2 per cell, with a spin and a shear in its velocity.
 fn block<const D: usize>(shape: Shape, transfer: Transfer) -> Sim<D> {
     block_moving::<D>(shape, transfer, true)
@@ -20,7 +23,7 @@ fn block_moving<const D: usize>(shape: Shape, transfer: Transfer, moving: bool) 
     let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [12; D], 0.1).unwrap();
     sim.set_shape(shape).unwrap();
     sim.set_transfer(transfer).unwrap();
-    let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+    let m = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
     let mut x = Vec::new();
     let n = 8usize;
     for k in 0..n.pow(D as u32) {
@@ -555,10 +558,12 @@ fn rk2_lumping_at_the_edge_of_a_body() {
     eprintln!("RK2 spinning block: relative momentum drift over 10 steps {drift:e}");
 }
 
-/// B-spline stencils stored as 1D factors give the same particle data, bit for bit, as the
-/// stencils stored node by node (APIC and FLIP, USL and MUSL, 2D and 3D).
+/// B-spline stencils stored as 1D factors, with their factored (row by row) scatter and gather,
+/// give the particle data of the stencils stored node by node to round-off: after 8 steps the
+/// kinematic fields agree to 1e-12 of their largest value (measured: below 1e-14) and the stresses
+/// to 1e-14 E (measured 2e-16 E), for APIC and FLIP, USL and MUSL, 2D and 3D.
 #[test]
-fn factored_and_stored_stencils_give_the_same_bits() {
+fn factored_and_stored_stencils_agree_to_round_off() {
     fn run<const D: usize>(
         shape: Shape,
         transfer: Transfer,
@@ -577,20 +582,53 @@ fn factored_and_stored_stencils_give_the_same_bits() {
         }
         sim.particles().clone()
     }
+    fn close<const D: usize>(a: &Particles<D>, b: &Particles<D>, what: &str) {
+        let fields: [(&str, Vec<f64>, Vec<f64>); 6] = [
+            ("position", flat(&a.position), flat(&b.position)),
+            ("velocity", flat(&a.velocity), flat(&b.velocity)),
+            (
+                "F",
+                flat(&a.deformation_gradient),
+                flat(&b.deformation_gradient),
+            ),
+            ("stress", flat(&a.stress), flat(&b.stress)),
+            ("affine", flat(&a.affine), flat(&b.affine)),
+            ("pressure", a.pressure.clone(), b.pressure.clone()),
+        ];
+        for (name, x, y) in fields {
+            assert_eq!(x.len(), y.len());
+            let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let diff = x
+                .iter()
+                .zip(&y)
+                .fold(0.0f64, |m, (u, v)| m.max((u - v).abs()));
+            // Stresses are the modulus times F − I: round-off in F (~1e-16) shows up as
+            // ~1e-16 E in them (measured 1.9e-11 Pa with E = 1e5 Pa).
+            let tolerance = match name {
+                "stress" | "pressure" => 1e-14 * YOUNG,
+                _ => 1e-12 * scale,
+            };
+            assert!(diff <= tolerance, "{what} {name}: {diff:e} of {scale:e}");
+        }
+    }
+    fn flat<T: AsRef<[f64]>>(v: &[T]) -> Vec<f64> {
+        v.iter().flat_map(|x| x.as_ref().to_vec()).collect()
+    }
     for shape in [Shape::Linear, Shape::BSpline2, Shape::BSpline3] {
         for (transfer, musl) in [
             (Transfer::Apic, false),
             (Transfer::PicFlip { flip: 0.95 }, true),
         ] {
-            assert_eq!(
-                run::<2>(shape, transfer, musl, false),
-                run::<2>(shape, transfer, musl, true),
-                "{shape:?} {transfer:?} 2D"
+            let what = format!("{shape:?} {transfer:?}");
+            close(
+                &run::<2>(shape, transfer, musl, false),
+                &run::<2>(shape, transfer, musl, true),
+                &format!("{what} 2D"),
             );
-            assert_eq!(
-                run::<3>(shape, transfer, musl, false),
-                run::<3>(shape, transfer, musl, true),
-                "{shape:?} {transfer:?} 3D"
+            close(
+                &run::<3>(shape, transfer, musl, false),
+                &run::<3>(shape, transfer, musl, true),
+                &format!("{what} 3D"),
             );
         }
     }
