@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! cargo bench --bench phases                 # all (about 2 minutes)
-//! cargo bench --bench phases -- 'p2g/3d'     # a subset
+//! cargo bench --bench phases -- p2g           # a subset (names contain the phase)
 //! ```
 //!
 //! One thread unless `RAYON_NUM_THREADS` says otherwise. Each figure is the time of the phase
@@ -13,12 +13,12 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rkmpm::boundary::Walls;
-use rkmpm::grid::GridNodes;
+use rkmpm::grid::{Grid, GridNodes};
 use rkmpm::integration::{BoundaryPoints, VcCorrection};
-use rkmpm::shape::{BSpline, BSplineOrder, ShapeFunction, Stencils, TensorStencils};
+use rkmpm::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use rkmpm::step::{grid_to_particle, grid_update, particle_to_grid, Bins, Fields, Forces};
 use rkmpm::step::{ParticleUpdate, TransferPlan};
-use rkmpm::{Material, Shape, Sim, Vector};
+use rkmpm::{Material, Particles, Shape, Sim, Vector};
 use std::time::Duration;
 
 /// The throughput block with `m^D` particles (2 per cell per direction), stepped once.
@@ -50,6 +50,30 @@ fn block<const D: usize>(m: usize, shape: Shape) -> Sim<D> {
     let dt = sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
     sim
+}
+
+/// Resets the nodes, then maps the particles to the grid with `stencils` (as a step does).
+fn p2g<const D: usize, S: StencilView<D>>(
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+    bins: &Bins<D>,
+    stencils: &S,
+    forces: Forces<D>,
+    nodes: &mut GridNodes<D>,
+) {
+    nodes.reset();
+    particle_to_grid(
+        grid,
+        ps,
+        bins,
+        stencils,
+        None,
+        |p| ps.velocity[p],
+        Some(|p: usize| ps.affine[p]),
+        Some(forces),
+        None,
+        nodes,
+    )
 }
 
 fn phases<const D: usize>(c: &mut Criterion, m: usize) {
@@ -99,26 +123,8 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         body: None,
         vc: None,
     };
-    let p2g = |nodes: &mut GridNodes<D>, stencils: &dyn Fn(&mut GridNodes<D>)| {
-        nodes.reset();
-        stencils(nodes);
-    };
-    let tensor_p2g = |nodes: &mut GridNodes<D>| {
-        particle_to_grid(
-            &grid,
-            &ps,
-            &bins,
-            &factors,
-            None,
-            |p| ps.velocity[p],
-            Some(|p: usize| ps.affine[p]),
-            Some(forces),
-            None,
-            nodes,
-        )
-    };
     g.bench_function(BenchmarkId::new("p2g", "bspline2 apic"), |b| {
-        b.iter(|| p2g(&mut nodes, &tensor_p2g))
+        b.iter(|| p2g(&grid, &ps, &bins, &factors, forces, &mut nodes))
     });
     let walls = Walls::<D>::default();
     g.bench_function("grid_update", |b| {
@@ -172,23 +178,9 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
             )
         })
     });
-    // The transfers with stored stencils, for the ratio against the factors.
-    let stored_p2g = |nodes: &mut GridNodes<D>| {
-        particle_to_grid(
-            &grid,
-            &ps,
-            &bins,
-            &stored,
-            None,
-            |p| ps.velocity[p],
-            Some(|p: usize| ps.affine[p]),
-            Some(forces),
-            None,
-            nodes,
-        )
-    };
+    // Particle to grid with stored stencils, for the ratio against the factors.
     g.bench_function(BenchmarkId::new("p2g", "bspline2 apic stored"), |b| {
-        b.iter(|| p2g(&mut nodes, &stored_p2g))
+        b.iter(|| p2g(&grid, &ps, &bins, &stored, forces, &mut nodes))
     });
     g.finish();
 }

@@ -16,6 +16,18 @@ use crate::grid::{scatter_add, Grid, NodeScatter};
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
+impl<const D: usize> Gathered<D> {
+    /// All sums zero.
+    pub fn zero() -> Self {
+        Gathered {
+            velocity: Vector::zeros(),
+            velocity_change: Vector::zeros(),
+            affine: Matrix::zeros(),
+            gradient: Matrix::zeros(),
+        }
+    }
+}
+
 /// What one particle scatters to the nodes of its stencil (particle to grid).
 #[derive(Debug, Clone, Copy)]
 pub struct ScatterInput<const D: usize> {
@@ -111,12 +123,7 @@ pub trait StencilView<const D: usize>: Sync {
         v_old: Option<&[Vector<D>]>,
         affine: bool,
     ) -> Gathered<D> {
-        let mut g = Gathered {
-            velocity: Vector::zeros(),
-            velocity_change: Vector::zeros(),
-            affine: Matrix::zeros(),
-            gradient: Matrix::zeros(),
-        };
+        let mut g = Gathered::zero();
         self.for_each_with_offset(grid, p, affine.then_some(xp), |_, node, offset| {
             let (n, w) = (node.node, node.value);
             let vi = v[n];
@@ -487,12 +494,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
         let offset = |a: usize, k: usize| {
             self.origin[a] + (first[a] + k as i64) as f64 * self.cell_size - xp[a]
         };
-        let mut g = Gathered {
-            velocity: Vector::zeros(),
-            velocity_change: Vector::zeros(),
-            affine: Matrix::zeros(),
-            gradient: Matrix::zeros(),
-        };
+        let mut g = Gathered::zero();
         let off0: [f64; W] = std::array::from_fn(|k| offset(0, k));
         // Rows: k = (k_1, …, k_{D−1}), axis 1 fastest.
         let mut k = [0usize; D];
