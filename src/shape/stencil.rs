@@ -123,21 +123,35 @@ pub trait StencilView<const D: usize>: Sync {
         v_old: Option<&[Vector<D>]>,
         affine: bool,
     ) -> Gathered<D> {
-        let mut g = Gathered::zero();
-        self.for_each_with_offset(grid, p, affine.then_some(xp), |_, node, offset| {
-            let (n, w) = (node.node, node.value);
-            let vi = v[n];
-            g.velocity += w * vi;
-            if let Some(v_old) = v_old {
-                g.velocity_change += w * (vi - v_old[n]);
-            }
-            if affine {
-                g.affine += (w * vi) * offset.transpose();
-            }
-            g.gradient += vi * node.gradient.transpose();
-        });
-        g
+        gather_node_by_node(self, grid, p, xp, v, v_old, affine)
     }
+}
+
+/// The grid-to-particle sums of [`StencilView::gather`], node by node.
+#[inline(always)]
+pub fn gather_node_by_node<const D: usize, S: StencilView<D> + ?Sized>(
+    view: &S,
+    grid: &Grid<D>,
+    p: usize,
+    xp: &Vector<D>,
+    v: &[Vector<D>],
+    v_old: Option<&[Vector<D>]>,
+    affine: bool,
+) -> Gathered<D> {
+    let mut g = Gathered::zero();
+    view.for_each_with_offset(grid, p, affine.then_some(xp), |_, node, offset| {
+        let (n, w) = (node.node, node.value);
+        let vi = v[n];
+        g.velocity += w * vi;
+        if let Some(v_old) = v_old {
+            g.velocity_change += w * (vi - v_old[n]);
+        }
+        if affine {
+            g.affine += (w * vi) * offset.transpose();
+        }
+        g.gradient += vi * node.gradient.transpose();
+    });
+    g
 }
 
 /// Shape-function values and gradients of every particle, stored node by node.
