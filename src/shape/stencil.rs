@@ -192,11 +192,6 @@ impl<const D: usize> Stencils<D> {
         }
     }
 
-    /// Frees the storage (when a step uses [`TensorStencils`] instead).
-    pub fn release(&mut self) {
-        *self = Stencils::default();
-    }
-
     /// The lumping weights of particle `p`, when the shape function is signed.
     #[inline]
     pub fn lumping_of(&self, p: usize) -> Option<&[f64]> {
@@ -488,6 +483,8 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
         true
     }
 
+    // The row loop and its factors `c`, `c_a` are written out here and in `scatter` on purpose:
+    // a shared row visitor (tried) made 3D P2G 140 -> 220 ns and G2P 145 -> 171 ns per particle.
     /// Sum factorization: along each row of the stencil (axis 0, contiguous nodes) the sums
     /// `Σ w_0 v`, `Σ w_0' v`, `Σ w_0 (x − x_p)_0 v` are taken once, then weighted by the row's
     /// factors of the other axes: `Ψ = w_0 c`, `∂_0 Ψ = w_0' c`, `∂_a Ψ = w_0 c_a` (a ≥ 1).
