@@ -17,7 +17,7 @@ use rkmpm::grid::{Grid, GridNodes};
 use rkmpm::integration::{BoundaryPoints, VcCorrection};
 use rkmpm::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use rkmpm::step::{grid_to_particle, grid_update, particle_to_grid, Bins, Fields, Forces};
-use rkmpm::step::{ParticleUpdate, TransferPlan};
+use rkmpm::step::{NewState, NoFinish, TransferPlan};
 use rkmpm::{Material, Particles, Shape, Sim, Vector};
 use std::time::Duration;
 
@@ -135,7 +135,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         apic: true,
         inverse_inertia: Some(4.0 / (grid.cell_size * grid.cell_size)),
     };
-    let (mut updates, mut admissible) = (Vec::<ParticleUpdate<D>>::new(), Vec::new());
+    let (mut new, mut admissible) = (NewState::<D>::default(), Vec::new());
     g.bench_function(BenchmarkId::new("g2p", "bspline2 apic"), |b| {
         b.iter(|| {
             grid_to_particle(
@@ -146,8 +146,8 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 &[None],
                 plan,
                 dt,
-                None,
-                &mut updates,
+                None::<&NoFinish<D>>,
+                &mut new,
                 &mut admissible,
             )
         })

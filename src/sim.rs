@@ -164,7 +164,7 @@ impl<const D: usize> Sim<D> {
                 + w.cubic.bytes()
                 + w.bins.bytes()
                 + bytes(&w.volumes)
-                + bytes(&w.updates)
+                + w.new_state.bytes()
                 + bytes(&w.admissible),
             grid: w.nodes.bytes() + w.bodies.iter().map(|b| b.bytes()).sum::<usize>(),
             active_nodes: w.active_nodes,

@@ -2,14 +2,15 @@
 
 use super::TransferPlan;
 use crate::error::ErrorKind;
-use crate::grid::{Grid, GridNodes};
+use crate::grid::{Grid, GridNodes, SharedSlice};
 use crate::material::PlasticState;
 use crate::particles::Particles;
 use crate::shape::StencilView;
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
-/// The new state of one particle, built during a step and committed when the step succeeds.
+/// The new state of one particle, built in registers during the gather and stored in the
+/// [`NewState`] arrays. The history of an elastoplastic particle goes to its own slot.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ParticleUpdate<const D: usize> {
     pub position: Vector<D>,
@@ -18,8 +19,6 @@ pub struct ParticleUpdate<const D: usize> {
     pub deformation_gradient: Matrix<D>,
     pub stress: Matrix<D>,
     pub pressure: f64,
-    /// New history of an elastoplastic particle (untouched for elastic ones).
-    pub plastic: PlasticState,
 }
 
 impl<const D: usize> Default for ParticleUpdate<D> {
@@ -31,8 +30,134 @@ impl<const D: usize> Default for ParticleUpdate<D> {
             deformation_gradient: Matrix::identity(),
             stress: Matrix::zeros(),
             pressure: 0.0,
-            plastic: PlasticState::default(),
         }
+    }
+}
+
+/// The new particle state of a step, stored as the particles are (one `Vec` per quantity), and
+/// swapped with theirs when the step succeeds: the commit moves no data. `affine` is empty
+/// unless APIC runs, `plastic` unless the particles carry history.
+#[derive(Debug, Default, Clone)]
+pub struct NewState<const D: usize> {
+    pub position: Vec<Vector<D>>,
+    pub velocity: Vec<Vector<D>>,
+    pub affine: Vec<Matrix<D>>,
+    pub deformation_gradient: Vec<Matrix<D>>,
+    pub stress: Vec<Matrix<D>>,
+    pub pressure: Vec<f64>,
+    /// Written for history particles only; the commit copies those.
+    pub plastic: Vec<PlasticState>,
+}
+
+impl<const D: usize> NewState<D> {
+    /// Sizes the arrays for `ps` (no work when the count did not change).
+    pub fn prepare(&mut self, ps: &Particles<D>, apic: bool) {
+        let n = ps.len();
+        self.position.resize(n, Vector::zeros());
+        self.velocity.resize(n, Vector::zeros());
+        self.affine
+            .resize(if apic { n } else { 0 }, Matrix::zeros());
+        self.deformation_gradient.resize(n, Matrix::identity());
+        self.stress.resize(n, Matrix::zeros());
+        self.pressure.resize(n, 0.0);
+        self.plastic
+            .resize(ps.plastic.len(), PlasticState::default());
+    }
+
+    /// Particle `p`'s new state.
+    pub fn get(&self, p: usize) -> ParticleUpdate<D> {
+        ParticleUpdate {
+            position: self.position[p],
+            velocity: self.velocity[p],
+            affine: self.affine.get(p).copied().unwrap_or_else(Matrix::zeros),
+            deformation_gradient: self.deformation_gradient[p],
+            stress: self.stress[p],
+            pressure: self.pressure[p],
+        }
+    }
+
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use crate::step::profile_bytes as b;
+        b(&self.position)
+            + b(&self.velocity)
+            + b(&self.affine)
+            + b(&self.deformation_gradient)
+            + b(&self.stress)
+            + b(&self.pressure)
+            + b(&self.plastic)
+    }
+
+    /// Write access for the parallel per-particle passes.
+    pub fn writer(&mut self) -> NewStateWriter<'_, D> {
+        NewStateWriter {
+            position: SharedSlice::new(&mut self.position),
+            velocity: SharedSlice::new(&mut self.velocity),
+            affine: SharedSlice::new(&mut self.affine),
+            deformation_gradient: SharedSlice::new(&mut self.deformation_gradient),
+            stress: SharedSlice::new(&mut self.stress),
+            pressure: SharedSlice::new(&mut self.pressure),
+            plastic: SharedSlice::new(&mut self.plastic),
+        }
+    }
+}
+
+/// Writes particles' new states from several threads; each particle is written by one task.
+pub struct NewStateWriter<'a, const D: usize> {
+    position: SharedSlice<'a, Vector<D>>,
+    velocity: SharedSlice<'a, Vector<D>>,
+    affine: SharedSlice<'a, Matrix<D>>,
+    deformation_gradient: SharedSlice<'a, Matrix<D>>,
+    stress: SharedSlice<'a, Matrix<D>>,
+    pressure: SharedSlice<'a, f64>,
+    plastic: SharedSlice<'a, PlasticState>,
+}
+
+impl<const D: usize> NewStateWriter<'_, D> {
+    /// Stores particle `p`'s new state (the affine matrix only when APIC keeps it).
+    ///
+    /// # Safety
+    /// No other thread accesses particle `p`'s new state meanwhile.
+    #[inline(always)]
+    pub unsafe fn store(&self, p: usize, u: &ParticleUpdate<D>) {
+        *self.position.at(p) = u.position;
+        *self.velocity.at(p) = u.velocity;
+        if !self.affine.is_empty() {
+            *self.affine.at(p) = u.affine;
+        }
+        *self.deformation_gradient.at(p) = u.deformation_gradient;
+        *self.stress.at(p) = u.stress;
+        *self.pressure.at(p) = u.pressure;
+    }
+
+    /// Particle `p`'s new state as stored.
+    ///
+    /// # Safety
+    /// No other thread writes particle `p`'s new state meanwhile.
+    #[inline(always)]
+    pub unsafe fn get(&self, p: usize) -> ParticleUpdate<D> {
+        ParticleUpdate {
+            position: *self.position.at(p),
+            velocity: *self.velocity.at(p),
+            affine: if self.affine.is_empty() {
+                Matrix::zeros()
+            } else {
+                *self.affine.at(p)
+            },
+            deformation_gradient: *self.deformation_gradient.at(p),
+            stress: *self.stress.at(p),
+            pressure: *self.pressure.at(p),
+        }
+    }
+
+    /// Particle `p`'s history slot, when the particles carry history.
+    ///
+    /// # Safety
+    /// No other thread accesses particle `p`'s new state meanwhile.
+    #[allow(clippy::mut_from_ref)]
+    #[inline(always)]
+    pub unsafe fn plastic(&self, p: usize) -> Option<&mut PlasticState> {
+        (!self.plastic.is_empty()).then(|| self.plastic.at(p))
     }
 }
 
@@ -79,8 +204,8 @@ pub fn velocity_gradient<const D: usize>(
     l
 }
 
-/// Completes particle `p`'s new state and says whether it is admissible.
-pub type Finish<'a, const D: usize> = dyn Fn(usize, &mut ParticleUpdate<D>) -> bool + Sync + 'a;
+/// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish<D>>`).
+pub type NoFinish<const D: usize> = fn(usize, &mut ParticleUpdate<D>, &mut PlasticState) -> bool;
 
 /// The grid fields particles read: one for all, or one per body under contact.
 #[derive(Clone, Copy)]
@@ -105,11 +230,12 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map). Particles of
 /// a rigid material (`rigid[material]` is its velocity) move with it and keep their `F`.
 ///
-/// `finish(p, u)`, when given, completes particle `p`'s new state while it is in cache (the
-/// constitutive update and the checks under USL) and says whether it is admissible; `admissible`
-/// receives that (true for every particle without `finish`).
+/// `finish(p, u, history)`, when given, completes particle `p`'s new state while it is in
+/// registers (the constitutive update and the checks under USL; `history` is its new history
+/// slot, or scratch for particles without one) and says whether it is admissible; `admissible`
+/// receives that (true for every particle without `finish`). The new states go to `new`.
 #[allow(clippy::too_many_arguments)]
-pub fn grid_to_particle<const D: usize>(
+pub fn grid_to_particle<const D: usize, F>(
     grid: &Grid<D>,
     ps: &Particles<D>,
     stencils: &impl StencilView<D>,
@@ -117,11 +243,13 @@ pub fn grid_to_particle<const D: usize>(
     rigid: &[Option<Vector<D>>],
     plan: TransferPlan,
     dt: f64,
-    finish: Option<&Finish<'_, D>>,
-    updates: &mut Vec<ParticleUpdate<D>>,
+    finish: Option<&F>,
+    new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
-) {
-    updates.resize(ps.len(), ParticleUpdate::default());
+) where
+    F: Fn(usize, &mut ParticleUpdate<D>, &mut PlasticState) -> bool + Sync,
+{
+    new.prepare(ps, plan.apic);
     let flip = plan.flip > 0.0;
     let update_deformation = finish.is_some();
     let apic_inertia = plan.inverse_inertia.is_some();
@@ -161,12 +289,17 @@ pub fn grid_to_particle<const D: usize>(
                 (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
         }
     };
-    updates
-        .par_iter_mut()
-        .enumerate()
-        .map(|(p, u)| {
-            gather(p, u);
-            finish.is_none_or(|f| f(p, u))
+    let writer = new.writer();
+    (0..ps.len())
+        .into_par_iter()
+        .map_init(PlasticState::default, |scratch, p| {
+            let mut u = ParticleUpdate::default();
+            gather(p, &mut u);
+            // SAFETY: every particle index is visited by one task only.
+            let ok = finish
+                .is_none_or(|f| f(p, &mut u, unsafe { writer.plastic(p) }.unwrap_or(scratch)));
+            unsafe { writer.store(p, &u) };
+            ok
         })
         .collect_into_vec(admissible);
 }

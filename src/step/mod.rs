@@ -30,14 +30,16 @@ pub use profile::{MemoryUse, PhaseTimes};
 pub use timestep::Progress;
 
 pub use bins::Bins;
-pub use grid_to_particle::{grid_to_particle, velocity_gradient, Fields, ParticleUpdate};
+pub use grid_to_particle::{
+    grid_to_particle, velocity_gradient, Fields, NewState, NewStateWriter, NoFinish, ParticleUpdate,
+};
 pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
 
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
 use crate::integration::BoundaryPoints;
-use crate::material::{block, embed3, pressure, Constitutive};
+use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
 use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
@@ -71,7 +73,8 @@ pub struct Workspace<const D: usize> {
     /// Nodes touched by more than one body this step (contact).
     pub shared: Vec<usize>,
     pub body_acceleration: Vec<Vector<D>>,
-    pub updates: Vec<ParticleUpdate<D>>,
+    /// The new particle state, swapped in by the commit.
+    pub new_state: NewState<D>,
     /// Whether each new particle state passed the checks.
     pub admissible: Vec<bool>,
 }
@@ -165,8 +168,8 @@ impl<const D: usize> Sim<D> {
             // A rejected step leaves everything as it was, the boundary points included.
             self.boundary = BoundaryPoints::default();
         }
-        let updates = result?;
-        self.commit(updates);
+        result?;
+        self.commit();
         self.work.times.commit += lap(&mut clock);
         self.time += dt;
         self.steps += 1;
@@ -230,7 +233,7 @@ impl<const D: usize> Sim<D> {
     }
 
     /// Runs the phases and returns the checked new particle state (in the workspace).
-    fn compute_step(&mut self, dt: f64) -> Result<Vec<ParticleUpdate<D>>> {
+    fn compute_step(&mut self, dt: f64) -> Result<()> {
         let grid = &self.grid;
         let work = &mut self.work;
         let signed = self.shape.is_signed();
@@ -280,7 +283,7 @@ impl<const D: usize> Sim<D> {
         &mut self,
         dt: f64,
         storage: impl Fn(&mut Workspace<D>) -> &mut TensorStencils<D, W>,
-    ) -> Result<Vec<ParticleUpdate<D>>> {
+    ) -> Result<()> {
         let order = match W {
             2 => BSplineOrder::Linear,
             3 => BSplineOrder::Quadratic,
@@ -303,7 +306,7 @@ impl<const D: usize> Sim<D> {
         dt: f64,
         stencils: &S,
         stored: Option<&Stencils<D>>,
-    ) -> Result<Vec<ParticleUpdate<D>>> {
+    ) -> Result<()> {
         let plan = self.transfer_plan();
         let grid = &self.grid;
         let ps = &self.particles;
@@ -449,7 +452,7 @@ impl<const D: usize> Sim<D> {
         let materials = &self.materials;
         let walls = &self.options.walls;
         let any_wall = walls.any_wall();
-        let finish = |p: usize, u: &mut ParticleUpdate<D>| -> bool {
+        let finish = |p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState| -> bool {
             let j = crate::determinant(&u.deformation_gradient);
             if j.is_nan() || j <= 0.0 {
                 // Inverted or not finite: the checks reject the step; no stress to compute.
@@ -465,7 +468,7 @@ impl<const D: usize> Sim<D> {
                 let f_old = embed3(&ps.deformation_gradient[p]);
                 let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
                 let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
-                u.plastic = state;
+                *history = state;
                 s3
             };
             u.stress = block(&s3);
@@ -479,7 +482,7 @@ impl<const D: usize> Sim<D> {
         let mut admissible = std::mem::take(&mut work.admissible);
 
         // 5. Grid to particle.
-        let mut updates = std::mem::take(&mut work.updates);
+        let mut new = std::mem::take(&mut work.new_state);
         let usl = self.options.scheme == Scheme::Usl;
         let fields = if contact.is_some() {
             Fields::PerBody(&work.bodies, &ps.material)
@@ -495,7 +498,7 @@ impl<const D: usize> Sim<D> {
             plan,
             dt,
             usl.then_some(&finish),
-            &mut updates,
+            &mut new,
             &mut admissible,
         );
         if !usl {
@@ -507,7 +510,7 @@ impl<const D: usize> Sim<D> {
                     l.momentum[n] = Vector::zeros();
                 }
             }
-            let velocity = |p: usize| updates[p].velocity;
+            let velocity = |p: usize| new.velocity[p];
             particle_to_grid(
                 grid,
                 ps,
@@ -515,18 +518,20 @@ impl<const D: usize> Sim<D> {
                 stencils,
                 stored,
                 velocity,
-                plan.apic.then_some(|p: usize| updates[p].affine),
+                plan.apic.then_some(|p: usize| new.affine[p]),
                 None,
                 None,
                 &mut work.nodes,
             );
             grid_update(grid, &self.options.walls, &mut work.nodes, None, mass_floor);
             let nodes = &work.nodes;
-            updates.par_iter_mut().enumerate().for_each(|(p, u)| {
-                let l = velocity_gradient(stencils, nodes, p);
-                u.deformation_gradient =
-                    (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
-            });
+            new.deformation_gradient
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(p, f)| {
+                    let l = velocity_gradient(stencils, nodes, p);
+                    *f = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+                });
         }
 
         // Boundary points move with the grid like massless particles; Nanson for n a.
@@ -560,10 +565,18 @@ impl<const D: usize> Sim<D> {
 
         work.times.grid_to_particle += lap(&mut clock);
         if !usl {
-            updates
-                .par_iter_mut()
-                .enumerate()
-                .map(|(p, u)| finish(p, u))
+            let writer = new.writer();
+            (0..ps.len())
+                .into_par_iter()
+                .map_init(PlasticState::default, |scratch, p| {
+                    // SAFETY: every particle index is visited by one task only.
+                    unsafe {
+                        let mut u = writer.get(p);
+                        let ok = finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
+                        writer.store(p, &u);
+                        ok
+                    }
+                })
                 .collect_into_vec(&mut admissible);
             work.times.constitutive += lap(&mut clock);
         }
@@ -572,13 +585,13 @@ impl<const D: usize> Sim<D> {
         let bad = admissible.iter().position(|ok| !ok);
         work.admissible = admissible;
         if let Some(p) = bad {
-            let (kind, what) = updates[p].check(grid).unwrap_err();
+            let (kind, what) = new.get(p).check(grid).unwrap_err();
             let message = format!(
                 "step {} (t = {:e}, dt = {dt:e}) rejected: particle {p} {what}; the simulation keeps its last good state",
                 self.steps + 1,
                 self.time
             );
-            work.updates = updates;
+            work.new_state = new;
             work.boundary_updates = boundary_updates;
             return Err(Error::new(kind, message));
         }
@@ -609,59 +622,36 @@ impl<const D: usize> Sim<D> {
                 self.steps + 1,
                 self.time
             );
-            work.updates = updates;
+            work.new_state = new;
             work.boundary_updates = boundary_updates;
             return Err(Error::new(ErrorKind::OutsideGrid, message));
         }
         work.boundary_updates = boundary_updates;
+        work.new_state = new;
         work.times.checks += lap(&mut clock);
-        Ok(updates)
+        Ok(())
     }
 
-    /// Copies the checked new state into the particles (in parallel, field by field).
-    fn commit(&mut self, updates: Vec<ParticleUpdate<D>>) {
+    /// Swaps the checked new state into the particles (the old one becomes the next step's
+    /// storage) and copies the new history of history particles.
+    fn commit(&mut self) {
         let ps = &mut self.particles;
-        let u = &updates;
-        let fields = (
-            ps.position.par_iter_mut(),
-            ps.velocity.par_iter_mut(),
-            ps.deformation_gradient.par_iter_mut(),
-            ps.stress.par_iter_mut(),
-            ps.pressure.par_iter_mut(),
-            u.par_iter(),
-        );
-        if matches!(self.options.transfer, Transfer::Apic) {
-            (fields, ps.affine.par_iter_mut()).into_par_iter().for_each(
-                |((x, v, f, s, q, u), c)| {
-                    (*x, *v, *f, *s, *q, *c) = (
-                        u.position,
-                        u.velocity,
-                        u.deformation_gradient,
-                        u.stress,
-                        u.pressure,
-                        u.affine,
-                    )
-                },
-            );
-        } else {
-            fields.into_par_iter().for_each(|(x, v, f, s, q, u)| {
-                (*x, *v, *f, *s, *q) = (
-                    u.position,
-                    u.velocity,
-                    u.deformation_gradient,
-                    u.stress,
-                    u.pressure,
-                )
-            });
+        let new = &mut self.work.new_state;
+        std::mem::swap(&mut ps.position, &mut new.position);
+        std::mem::swap(&mut ps.velocity, &mut new.velocity);
+        std::mem::swap(&mut ps.deformation_gradient, &mut new.deformation_gradient);
+        std::mem::swap(&mut ps.stress, &mut new.stress);
+        std::mem::swap(&mut ps.pressure, &mut new.pressure);
+        if new.affine.len() == ps.affine.len() {
+            std::mem::swap(&mut ps.affine, &mut new.affine);
         }
         let materials = &self.materials;
         ps.plastic
             .par_iter_mut()
             .zip(&ps.material)
-            .zip(u)
+            .zip(&new.plastic)
             .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
-            .for_each(|((state, _), u)| *state = u.plastic);
-        self.work.updates = updates;
+            .for_each(|((state, _), new)| *state = *new);
         let b = &mut self.boundary;
         for (k, u) in self.work.boundary_updates.iter().enumerate() {
             b.position[k] = u.position;
