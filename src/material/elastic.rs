@@ -2,6 +2,7 @@
 
 use super::Constitutive;
 use crate::error::{check_positive, Error, Result};
+use crate::Matrix;
 use nalgebra::Matrix3;
 
 /// Density and elastic constants, with the Lamé parameters derived once.
@@ -95,6 +96,37 @@ impl Constitutive for NeoHookean {
     }
 }
 
+impl LinearElastic {
+    /// The `D×D` block of the Cauchy stress and the pressure for a `D×D` deformation gradient
+    /// (plane strain in 2D), without the 3×3 embedding: the same values as
+    /// [`Constitutive::cauchy_stress`].
+    #[inline]
+    pub fn stress_block<const D: usize>(&self, f: &Matrix<D>) -> (Matrix<D>, f64) {
+        let eps = 0.5 * (f + f.transpose()) - Matrix::<D>::identity();
+        // ε_33 = 0 in plane strain.
+        let volumetric = self.0.lambda * eps.trace();
+        let s = Matrix::<D>::identity() * volumetric + eps * (2.0 * self.0.mu);
+        let out_of_plane = if D == 2 { volumetric } else { 0.0 };
+        (s, -(s.trace() + out_of_plane) / 3.0)
+    }
+}
+
+impl NeoHookean {
+    /// The `D×D` block of the Cauchy stress and the pressure for a `D×D` deformation gradient
+    /// with `j = det f > 0` (plane strain in 2D), without the 3×3 embedding: the same values as
+    /// [`Constitutive::cauchy_stress`].
+    #[inline]
+    pub fn stress_block<const D: usize>(&self, f: &Matrix<D>, j: f64) -> (Matrix<D>, f64) {
+        let b = f * f.transpose();
+        let shear = self.0.mu / j;
+        let volumetric = self.0.lambda * j.ln() / j;
+        let s = (b - Matrix::<D>::identity()) * shear + Matrix::<D>::identity() * volumetric;
+        // In plane strain b_33 − 1 = 0, so σ_33 is the volumetric term alone.
+        let out_of_plane = if D == 2 { volumetric } else { 0.0 };
+        (s, -(s.trace() + out_of_plane) / 3.0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -125,6 +157,41 @@ mod tests {
         let (sl, sn) = (le.cauchy_stress(&f), nh.cauchy_stress(&f));
         // The models differ at second order in the strain (1e-6): relative 1e-5 is generous.
         assert!((sl - sn).norm() < 1e-5 * sl.norm(), "{sl} vs {sn}");
+    }
+
+    /// The block forms take the same operations as the 3×3 forms on the embedded gradient (the
+    /// embedding adds exact zeros), so they agree bit for bit.
+    #[test]
+    fn stress_blocks_equal_the_embedded_three_by_three_stress() {
+        use crate::material::{block, embed3, pressure, Constitutive};
+        fn check<const D: usize>(m: &Material, f: &crate::Matrix<D>) {
+            let j = crate::determinant(f);
+            let s3 = m.cauchy_stress(&embed3(f));
+            let (s, p) = m.elastic_stress(f, j);
+            assert_eq!(s, block::<D>(&s3), "{m:?} {f}");
+            assert_eq!(p, pressure(&s3), "{m:?} {f}");
+        }
+        let models = [
+            Material::neo_hookean(1000.0, 1e7, 0.3).unwrap(),
+            Material::linear_elastic(1000.0, 1e7, 0.3).unwrap(),
+        ];
+        let mut x = 0.37_f64;
+        let mut next = || {
+            x = (x * 9301.0 + 0.49297).fract();
+            0.6 * x - 0.3
+        };
+        for _ in 0..200 {
+            let f2 = crate::Matrix::<2>::identity() + crate::Matrix::<2>::from_fn(|_, _| next());
+            let f3 = crate::Matrix::<3>::identity() + crate::Matrix::<3>::from_fn(|_, _| next());
+            for m in &models {
+                if crate::determinant(&f2) > 0.0 {
+                    check(m, &f2);
+                }
+                if crate::determinant(&f3) > 0.0 {
+                    check(m, &f3);
+                }
+            }
+        }
     }
 
     #[test]

@@ -241,6 +241,28 @@ impl Constitutive for Material {
     }
 }
 
+impl Material {
+    /// The `D×D` block of the Cauchy stress and the pressure of an elastic material at the
+    /// `D×D` deformation gradient `f` with `j = det f > 0`. Linear elastic and neo-Hookean
+    /// work on the block directly (no 3×3 embedding); the others go through
+    /// [`Constitutive::cauchy_stress`].
+    #[inline]
+    pub fn elastic_stress<const D: usize>(
+        &self,
+        f: &crate::Matrix<D>,
+        j: f64,
+    ) -> (crate::Matrix<D>, f64) {
+        match self {
+            Material::NeoHookean(m) => m.stress_block(f, j),
+            Material::LinearElastic(m) => m.stress_block(f),
+            m => {
+                let s = m.cauchy_stress(&embed3(f));
+                (block(&s), pressure(&s))
+            }
+        }
+    }
+}
+
 /// Embeds a `D×D` deformation gradient in 3×3 (plane strain in 2D).
 pub fn embed3<const D: usize>(f: &crate::Matrix<D>) -> Matrix3<f64> {
     let mut f3 = Matrix3::identity();

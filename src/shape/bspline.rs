@@ -26,9 +26,9 @@ impl BSplineOrder {
     #[inline]
     fn first_node(self, xi: f64) -> i64 {
         match self {
-            BSplineOrder::Linear => xi.floor() as i64,
-            BSplineOrder::Quadratic => (xi - 0.5).floor() as i64,
-            BSplineOrder::Cubic => xi.floor() as i64 - 1,
+            BSplineOrder::Linear => crate::floor_index(xi),
+            BSplineOrder::Quadratic => crate::floor_index(xi - 0.5),
+            BSplineOrder::Cubic => crate::floor_index(xi) - 1,
         }
     }
 

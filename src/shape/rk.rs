@@ -122,7 +122,7 @@ impl<const D: usize> ReproducingKernel<D> {
     }
 
     fn first_node(&self, xi: f64) -> i64 {
-        (xi - self.support).floor() as i64 + 1
+        crate::floor_index(xi - self.support) + 1
     }
 
     /// Moment matrix at a point `xi` (cell units) of an unbounded unit lattice.

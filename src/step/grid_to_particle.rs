@@ -162,6 +162,24 @@ impl<const D: usize> NewStateWriter<'_, D> {
 }
 
 impl<const D: usize> ParticleUpdate<D> {
+    /// Whether the new state is admissible, given `j = det F`: the same answer as
+    /// [`ParticleUpdate::check`], from one sum instead of a test per value (a sum that is finite
+    /// has no NaN or infinite term; when the sum is not finite, the full check decides).
+    #[inline]
+    pub fn is_admissible(&self, grid: &Grid<D>, j: f64) -> bool {
+        let sum = self.position.sum()
+            + self.velocity.sum()
+            + self.deformation_gradient.sum()
+            + self.stress.sum()
+            + self.affine.sum()
+            + self.pressure;
+        if sum.is_finite() && j > 0.0 && grid.contains(&self.position) {
+            true
+        } else {
+            self.check(grid).is_ok()
+        }
+    }
+
     /// Whether the new state is admissible; if not, the kind of failure and what was wrong.
     pub fn check(&self, grid: &Grid<D>) -> Result<(), (ErrorKind, String)> {
         let finite = self.position.iter().all(|c| c.is_finite())

@@ -461,23 +461,21 @@ impl<const D: usize> Sim<D> {
                 return false;
             }
             let material = &materials[ps.material[p] as usize];
-            let f = embed3(&u.deformation_gradient);
-            let s3 = if material.is_elastic() {
-                material.cauchy_stress(&f)
+            (u.stress, u.pressure) = if material.is_elastic() {
+                material.elastic_stress(&u.deformation_gradient, j)
             } else {
+                let f = embed3(&u.deformation_gradient);
                 let f_old = embed3(&ps.deformation_gradient[p]);
                 let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
                 let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
                 *history = state;
-                s3
+                (block(&s3), pressure(&s3))
             };
-            u.stress = block(&s3);
-            u.pressure = pressure(&s3);
             // Particles stay inside the walls (see `Walls::clamp_to_walls`).
             if any_wall {
                 walls.clamp_to_walls(grid, &mut u.position);
             }
-            u.check(grid).is_ok()
+            u.is_admissible(grid, j)
         };
         let mut admissible = std::mem::take(&mut work.admissible);
 
