@@ -313,6 +313,12 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             });
     }
 
+    /// Integer index of the first stencil node of particle `p`.
+    #[inline]
+    pub fn first_node(&self, p: usize) -> [i64; D] {
+        self.first[p]
+    }
+
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         self.first.capacity() * 8 * D

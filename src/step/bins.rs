@@ -13,7 +13,7 @@
 //! The occupied blocks also give the node blocks a step touches (each occupied block and its
 //! upper neighbours), so the list of active nodes is collected without visiting empty blocks.
 
-use crate::grid::{Grid, GridNodes};
+use crate::grid::{Grid, GridNodes, SharedSlice};
 use crate::shape::ShapeFunction;
 use crate::Vector;
 use rayon::prelude::*;
@@ -68,52 +68,88 @@ impl<const D: usize> Default for Bins<D> {
 impl<const D: usize> Bins<D> {
     /// Bins the particles at `x` for `shape` on `grid`.
     pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
-        let side = (shape.stencil_width().max(2) - 1).max(MIN_BLOCK);
+        self.compute_from_origins(shape.stencil_width(), grid, x.len(), |p| {
+            shape.stencil_origin(&grid.to_cell_units(&x[p]))
+        });
+    }
+
+    /// Bins `n` particles whose stencils, `width` nodes per axis, start at the integer node
+    /// index `first_node(p)` (`ShapeFunction::stencil_origin`; stencils stored as factors
+    /// already hold it).
+    pub fn compute_from_origins(
+        &mut self,
+        width: usize,
+        grid: &Grid<D>,
+        n: usize,
+        first_node: impl Fn(usize) -> [i64; D] + Sync,
+    ) {
+        // Powers of two, so that a particle's block is a shift of its node index.
+        let side = (width.max(2) - 1).max(MIN_BLOCK).next_power_of_two();
         let long = side.max(LONG_BLOCK);
         let block: [usize; D] = std::array::from_fn(|a| if a == 0 { long } else { side });
         let dims = grid.dims();
         let blocks: [usize; D] = std::array::from_fn(|a| dims[a].div_ceil(block[a]));
         let total: usize = blocks.iter().product();
-        assert!(total < u32::MAX as usize && x.len() < u32::MAX as usize);
+        assert!(total < u32::MAX as usize && n < u32::MAX as usize);
         self.block = block;
         self.blocks = blocks;
+        let shift = block.map(|b| b.trailing_zeros());
         let ghost = grid.ghost_layers() as i64;
         // Block of every particle, from its stencil's first node (clamped: a particle outside
         // the grid is refused by the step's checks before it gets here).
-        self.keys.resize(x.len(), 0);
-        self.keys
-            .par_iter_mut()
-            .zip(x.par_iter())
-            .for_each(|(k, xp)| {
-                let first = shape.stencil_origin(&grid.to_cell_units(xp));
-                let mut key = 0usize;
-                for a in (0..D).rev() {
-                    let s = (first[a] + ghost).clamp(0, dims[a] as i64 - 1) as usize;
-                    key = key * blocks[a] + s / block[a];
-                }
-                *k = key as u32;
-            });
-        // Counting sort (stable: particles of a block stay in index order).
-        self.counts.clear();
-        self.counts.resize(total + 1, 0);
-        for &k in &self.keys {
-            self.counts[k as usize + 1] += 1;
-        }
-        self.occupied.clear();
-        for b in 0..total {
-            let (start, n) = (self.counts[b], self.counts[b + 1]);
-            if n > 0 {
-                self.occupied
-                    .push((b as u32, start as usize..(start + n) as usize));
+        self.keys.resize(n, 0);
+        self.keys.par_iter_mut().enumerate().for_each(|(p, k)| {
+            let first = first_node(p);
+            let mut key = 0usize;
+            for a in (0..D).rev() {
+                let s = (first[a] + ghost).clamp(0, dims[a] as i64 - 1) as usize;
+                key = key * blocks[a] + (s >> shift[a]);
             }
-            self.counts[b + 1] = start + n;
+            *k = key as u32;
+        });
+        // Counting sort (stable: particles of a block stay in index order), in parallel over
+        // chunks of the particles: each chunk counts its keys, a prefix over (block, chunk)
+        // gives each chunk its slots in every block, and the chunks place their particles at
+        // once. A stable sort has one result, so the order does not depend on the chunks.
+        let chunk = n.div_ceil(rayon::current_num_threads().max(1)).max(1 << 14);
+        let chunks = n.div_ceil(chunk).max(1);
+        self.counts.clear();
+        self.counts.resize(chunks * total, 0);
+        self.counts
+            .par_chunks_mut(total)
+            .zip(self.keys.par_chunks(chunk))
+            .for_each(|(counts, keys)| {
+                for &k in keys {
+                    counts[k as usize] += 1;
+                }
+            });
+        self.occupied.clear();
+        let mut start = 0u32;
+        for b in 0..total {
+            let first = start;
+            for c in 0..chunks {
+                let count = &mut self.counts[c * total + b];
+                (*count, start) = (start, start + *count);
+            }
+            if start > first {
+                self.occupied
+                    .push((b as u32, first as usize..start as usize));
+            }
         }
-        self.order.resize(x.len(), 0);
-        for (p, &k) in self.keys.iter().enumerate() {
-            let slot = &mut self.counts[k as usize];
-            self.order[*slot as usize] = p as u32;
-            *slot += 1;
-        }
+        self.order.resize(n, 0);
+        let order = SharedSlice::new(&mut self.order);
+        self.counts
+            .par_chunks_mut(total)
+            .zip(self.keys.par_chunks(chunk))
+            .enumerate()
+            .for_each(|(c, (slots, keys))| {
+                for (i, &k) in keys.iter().enumerate() {
+                    let slot = &mut slots[k as usize];
+                    // SAFETY: the prefix gave every (block, chunk) its own slots.
+                    unsafe { *order.at(*slot as usize) = (c * chunk + i) as u32 };
+                    *slot += 1;
+                }
+            });
         // Colours, and the node blocks each occupied block touches (itself and its upper
         // neighbours).
         self.colours.resize(1 << D, Vec::new());

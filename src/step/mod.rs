@@ -248,11 +248,6 @@ impl<const D: usize> Sim<D> {
                 b.ensure(grid, signed, true, signed)?;
             }
         }
-        let mut clock = std::time::Instant::now();
-        work.bins
-            .compute(self.shape.as_ref(), grid, &self.particles.position);
-        work.times.bins += lap(&mut clock);
-
         // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
         //    stored lists.
         let order = match self.options.shape {
@@ -267,8 +262,12 @@ impl<const D: usize> Sim<D> {
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
             Some(BSplineOrder::Cubic) => self.tensor_phases(dt, |w| &mut w.cubic),
             None => {
-                let mut stencils = std::mem::take(&mut self.work.stencils);
                 let mut clock = std::time::Instant::now();
+                self.work
+                    .bins
+                    .compute(self.shape.as_ref(), &self.grid, &self.particles.position);
+                self.work.times.bins += lap(&mut clock);
+                let mut stencils = std::mem::take(&mut self.work.stencils);
                 stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);
                 self.work.times.shape += lap(&mut clock);
                 let result = self.phases(dt, &stencils, Some(&stencils));
@@ -293,6 +292,13 @@ impl<const D: usize> Sim<D> {
         let mut clock = std::time::Instant::now();
         stencils.compute(&BSpline::new(order), &self.grid, &self.particles.position);
         self.work.times.shape += lap(&mut clock);
+        // The particles' blocks from their stencils' first nodes.
+        self.work
+            .bins
+            .compute_from_origins(W, &self.grid, self.particles.len(), |p| {
+                stencils.first_node(p)
+            });
+        self.work.times.bins += lap(&mut clock);
         let result = self.phases(dt, &stencils, None);
         *storage(&mut self.work) = stencils;
         result
