@@ -58,6 +58,9 @@ pub struct GranularColumn {
     pub dilatancy_degrees: f64,
     pub cohesion: f64,
     pub floor_friction: f64,
+    /// The wall at `x = 0` the column stands against (slip by default, as in the experiments'
+    /// smooth glass; `Friction(μ)` or `Fixed` for the sensitivity study).
+    pub wall: Boundary,
     pub gravity: f64,
     /// Simulated time, in units of `sqrt(H0 / g)` (the flow stops after about 3–4).
     pub duration: f64,
@@ -80,6 +83,7 @@ impl Default for GranularColumn {
             dilatancy_degrees: 0.0,
             cohesion: 0.0,
             floor_friction: friction.to_radians().tan(),
+            wall: Boundary::Slip,
             gravity: 9.81,
             duration: 8.0,
             shape: Shape::BSpline2,
@@ -129,7 +133,7 @@ impl GranularColumn {
         sim.set_shape(self.shape)?;
         sim.set_integration(self.integration)?;
         sim.set_transfer(self.transfer)?;
-        sim.set_boundary(0, Side::Low, Boundary::Slip)?;
+        sim.set_boundary(0, Side::Low, self.wall)?;
         sim.set_boundary(1, Side::Low, Boundary::Friction(self.floor_friction))?;
         sim.set_gravity([0.0, -self.gravity])?;
         let mat = sim.add_material(Material::drucker_prager(
