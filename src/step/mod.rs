@@ -140,10 +140,23 @@ impl<const D: usize> Sim<D> {
         let generate = self.vc.is_some() && self.boundary.is_empty() && self.steps == 0;
         if generate {
             // VC needs the surface: take it from the particle lattice (documented).
-            let (x, na) = BoundaryPoints::from_lattice(
+            let (mut x, na) = BoundaryPoints::from_lattice(
                 &self.particles.position,
                 &self.particles.reference_volume,
             );
+            // A face on the domain's edge (a body against a wall or symmetry plane) may land a
+            // hair outside it: the spacing V^(1/dim) is rounded. Such points go onto the edge.
+            let (lo, hi) = (self.grid.origin, self.grid.upper());
+            let tol = 1e-9 * self.grid.cell_size;
+            for p in x.iter_mut() {
+                for a in 0..D {
+                    if p[a] < lo[a] && p[a] >= lo[a] - tol {
+                        p[a] = lo[a];
+                    } else if p[a] > hi[a] && p[a] <= hi[a] + tol {
+                        p[a] = hi[a];
+                    }
+                }
+            }
             if let Some(b) = x.iter().position(|x| !self.grid.contains(x)) {
                 return Err(Error::new(
                     ErrorKind::OutsideGrid,
