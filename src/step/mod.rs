@@ -1,10 +1,10 @@
 //! One explicit MPM step (METHOD.md section 1), phase by phase:
 //!
-//! 0. particles binned by grid block and the blocks coloured ([`Bins`]), for the lock-free,
-//!    thread-count-independent parallel maps to the grid;
 //! 1. shape functions of every particle, once per step: B-splines as 1D factors
 //!    ([`crate::shape::TensorStencils`]), RK and every shape under VC as node lists
-//!    ([`crate::shape::Stencils`]);
+//!    ([`crate::shape::Stencils`]); and the particles binned by grid block, the blocks coloured
+//!    ([`Bins`]), for the lock-free, thread-count-independent parallel maps to the grid
+//!    (B-splines take each particle's block from its factors' first node);
 //! 2. body forces (the callback, once per step with whole arrays), VC corrections;
 //! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force;
 //! 4. [`grid_update`]: velocities, wall conditions;
@@ -14,8 +14,9 @@
 //!    the constitutive update and checks run after;
 //! 6. the grid is reset where it was written.
 //!
-//! The new particle state is built in a workspace and committed only when every particle passed
-//! the checks (finite, `det F > 0`, inside the grid), so a failed step leaves the last good state.
+//! The new particle state is built in arrays of the workspace ([`NewState`]) and swapped with the
+//! particles' only when every particle passed the checks (finite, `det F > 0`, inside the grid),
+//! so a failed step leaves the last good state.
 //! [`PhaseTimes`] accumulates the time per phase.
 
 mod bins;
