@@ -236,7 +236,7 @@ typedef uint32_t RkmpmField;
 /**
  * Variationally consistent integration of order `vc_order` (1..4): test-function gradients
  * corrected so the divergence equality of that order holds (needs boundary points; without any,
- * they are generated from the particle lattice at the first step).
+ * the surface of the particles is found afresh at every step, so a body may break apart).
  */
 #define RKMPM_INTEGRATION_VC 1
 
@@ -607,7 +607,8 @@ enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim,
  * grid), `area_normals` (`count * dim`, outward normal times area; length in 2D; non-zero) and
  * `tractions` (`count * dim`, force per current area, or NULL for none). They move with the grid,
  * update their normals by Nanson's formula, carry the tractions and close VC integration's
- * divergence equality. All or nothing.
+ * divergence equality. All or nothing. Without any, VC finds the surface of the particles at
+ * every step.
  *
  * # Safety
  * `sim` must be a live handle; the arrays must hold the stated number of values.
@@ -619,7 +620,9 @@ enum RkmpmStatus rkmpm_sim_add_boundary_points(struct RkmpmSim *sim,
                                                const double *tractions);
 
 /**
- * Writes to `*out_count` the number of boundary points.
+ * Writes to `*out_count` the number of boundary points VC integrated over in the last step: the
+ * given ones, or without any those found on the surface of the particles at the start of that
+ * step (0 before the first step).
  *
  * # Safety
  * `sim` must be a live handle; `out_count` valid for a write.

@@ -95,6 +95,9 @@ pub struct Sim<const D: usize> {
     pub(crate) particles: Particles<D>,
     pub(crate) body_force: Option<Box<dyn BodyForce<D>>>,
     pub(crate) boundary: BoundaryPoints<D>,
+    /// The surface VC found from the particles for the last step (when no boundary points are
+    /// given); derived from the particles at every step, so neither checkpointed nor restored.
+    pub(crate) surface: BoundaryPoints<D>,
     pub(crate) vc: Option<VcCorrection<D>>,
     pub(crate) time: f64,
     pub(crate) steps: u64,
@@ -128,6 +131,7 @@ impl<const D: usize> Sim<D> {
             particles: Particles::default(),
             body_force: None,
             boundary: BoundaryPoints::default(),
+            surface: BoundaryPoints::default(),
             vc: None,
             time: 0.0,
             steps: 0,
@@ -276,8 +280,9 @@ impl<const D: usize> Sim<D> {
 
     /// Adds boundary points (surface quadrature points for VC integration and tractions):
     /// positions on the surface, outward normals times area (length in 2D), and tractions (force
-    /// per current area) or `None`. All or nothing. Without any, VC generates them from the
-    /// particle lattice at the first step.
+    /// per current area) or `None`. All or nothing. They move with the grid (Nanson for the
+    /// normals). Without any, VC finds the surface of the particles afresh at every step
+    /// ([`BoundaryPoints::of_particles`], [`Sim::vc_surface`]).
     pub fn add_boundary_points(
         &mut self,
         positions: &[Vector<D>],
@@ -301,8 +306,20 @@ impl<const D: usize> Sim<D> {
         self.boundary.add(positions, area_normals, tractions)
     }
 
+    /// The boundary points given with [`Sim::add_boundary_points`], as they have moved.
     pub fn boundary_points(&self) -> &BoundaryPoints<D> {
         &self.boundary
+    }
+
+    /// The surface VC integrated over in the last step: the given boundary points, or without
+    /// any the surface found from the particles at the start of that step (empty before the
+    /// first step and without VC).
+    pub fn vc_surface(&self) -> &BoundaryPoints<D> {
+        if self.boundary.is_empty() {
+            &self.surface
+        } else {
+            &self.boundary
+        }
     }
 
     /// Adds a material and returns its id.

@@ -723,8 +723,8 @@ contains
    end subroutine sim_set_shape
 
    !> Chooses the integration (before the first step); `vc_order` (1..4, default 1) for VC only.
-   !> VC uses the boundary points (add_boundary_points); without any, they are generated from the
-   !> particle lattice at the first step.
+   !> VC uses the boundary points (add_boundary_points); without any, it finds the surface of the
+   !> particles afresh at every step.
    subroutine sim_set_integration(self, integration, vc_order, stat, errmsg)
       class(rkmpm_sim), intent(inout) :: self
       integer(c_int32_t), intent(in) :: integration
@@ -1045,7 +1045,8 @@ contains
       if (present(errmsg)) errmsg = text
    end subroutine sim_add_boundary_points
 
-   !> The number of boundary points.
+   !> The number of boundary points VC integrated over in the last step (given, or found on the
+   !> surface of the particles).
    integer(c_size_t) function sim_boundary_point_count(self, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
       integer(c_int), intent(out), optional :: stat

@@ -1851,18 +1851,6 @@ static void step_rows(void) {
     CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
     drop(&f);
   }
-  ROW("step.vc_lattice_outside_grid", RKMPM_ERR_OUTSIDE_GRID) {
-    /* VC without boundary points takes them from the particle lattice; a particle closer to
-       the edge than half its spacing puts one outside the grid. */
-    Fixture f = empty_sim(2);
-    RKMPM_CHECK(rkmpm_sim_add_material_linear_elastic(f.sim, 1.0, 100.0, 0.3, &f.material));
-    const double x[2] = {0.01, 0.5}, vol[1] = {H * H / 4.0};
-    RKMPM_CHECK(rkmpm_sim_add_particles(f.sim, f.material, 1, x, vol, NULL));
-    RKMPM_CHECK(rkmpm_sim_set_integration(f.sim, RKMPM_INTEGRATION_VC, 1));
-    RKMPM_CHECK(rkmpm_sim_set_transfer(f.sim, RKMPM_TRANSFER_PIC_FLIP, 0.0));
-    CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
-    drop(&f);
-  }
   ROW("step.wall_needs_cells", RKMPM_ERR_INVALID_ARGUMENT) {
     /* A fixed wall across an axis of one cell; the quadratic B-spline needs two ghost layers. */
     const size_t cells[2] = {1, 10};

@@ -10,9 +10,13 @@
 //! * `--rods 2008|2015`: Bui et al. (2008) rods (ρ 2650, E 0.84 MPa, φ 19.8°, default) or the
 //!   set used with the later rod experiments (ρ 2040, E 5.84 MPa, φ 21.9°).
 //! * `--floor MU`: floor friction coefficient (default tan φ).
+//! * `--method bspline2|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1 (ã = 2),
+//!   with material-point integration or VC of order 1 (the surface found from the particles at
+//!   every step).
 
 use rkmpm::boundary::Boundary;
 use rkmpm::scenes::{GranularColumn, NGUYEN_BUI_FUKAGAWA};
+use rkmpm::{Integration, Shape};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -50,8 +54,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "fixed" => Boundary::Fixed,
         other => return Err(format!("--wall slip|friction|fixed, got {other}").into()),
     };
+    let method = value("--method").unwrap_or_else(|| "bspline2".into());
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    (base.shape, base.integration) = match method.as_str() {
+        "bspline2" => (Shape::BSpline2, Integration::MaterialPoint),
+        "bspline2-vc" => (Shape::BSpline2, Integration::Vc { order: 1 }),
+        "rk1" => (rk1, Integration::MaterialPoint),
+        "rk1-vc" => (rk1, Integration::Vc { order: 1 }),
+        other => {
+            return Err(format!("--method bspline2|bspline2-vc|rk1|rk1-vc, got {other}").into())
+        }
+    };
     println!(
-        "cells {cells}, wall {wall}, rods {rods}, floor μ {:.3}\n",
+        "cells {cells}, wall {wall}, rods {rods}, floor μ {:.3}, method {method}\n",
         base.floor_friction
     );
     println!("| a | run-out | law | ratio | height | law | ratio | KE end | steps | s |");

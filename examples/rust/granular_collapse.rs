@@ -5,12 +5,17 @@
 //!
 //! `cargo run --release --example granular_collapse [-- --quick]` (about 2 minutes; `--quick`
 //! runs 8 cells across the column instead of 16).
+//!
+//! `cargo run --release --example granular_collapse -- --methods` (about 15 minutes) runs the
+//! same aspect ratios with the quadratic B-spline and RK1 (ã = 2), each with material-point and
+//! first-order VC integration, and writes `methods.md` and `methods.png` there instead (issue 4:
+//! "use RK + VC and show the difference").
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
 use rkmpm::scenes::{CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
-use rkmpm::Field;
+use rkmpm::{Field, Integration, Shape};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -29,6 +34,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )
     .map_err(|_| "font")?;
     let cells = if quick { 8 } else { 16 };
+    if std::env::args().any(|a| a == "--methods") {
+        return methods(cells, &out);
+    }
     let mut rows: Vec<CollapseResult> = Vec::new();
     for a in ASPECTS {
         let column = GranularColumn {
@@ -55,6 +63,157 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     write_tables(&rows, cells, &out)?;
     plot(&rows, &out.join("collapse.png"))?;
+    Ok(())
+}
+
+/// The methods compared by `--methods`.
+fn method_list() -> [(&'static str, Shape, Integration); 4] {
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let (mp, vc) = (Integration::MaterialPoint, Integration::Vc { order: 1 });
+    [
+        ("quadratic B-spline", Shape::BSpline2, mp),
+        ("quadratic B-spline + VC1", Shape::BSpline2, vc),
+        ("RK1 (ã = 2)", rk1, mp),
+        ("RK1 (ã = 2) + VC1", rk1, vc),
+    ]
+}
+
+/// Every method at every aspect ratio: `methods.md` (table, fitted exponents) and `methods.png`.
+fn methods(cells: usize, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    let law = NGUYEN_BUI_FUKAGAWA;
+    let mut md = String::from("# Granular column collapse: shape functions and integration\n\n");
+    writeln!(md, "Regenerate: `cargo run --release --example granular_collapse -- --methods{}`. The scene of [README.md](README.md) ({cells} cells across the column, APIC, CFL 0.3) with each method; VC finds the surface of the particles at every step. Ratios are to the laws of Nguyen, Bui & Fukagawa (2015); exponents are fitted over a ≥ 1.5 (laws: run-out 0.73, height 1/3). Targets: values within 20%, exponents within 15%.\n", if cells == 8 { " --quick" } else { "" })?;
+    writeln!(md, "| method | a | run-out (L∞−L0)/L0 | ratio | height H∞/L0 | ratio | KE/(m g H0) at end | largest f/E | steps | run time (s) |")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
+    let mut all: Vec<(&str, Vec<CollapseResult>)> = Vec::new();
+    let mut exponents = String::new();
+    for (name, shape, integration) in method_list() {
+        let mut rows = Vec::new();
+        for a in ASPECTS {
+            let column = GranularColumn {
+                aspect: a,
+                cells_across: cells,
+                shape,
+                integration,
+                ..Default::default()
+            };
+            let r = column.run()?;
+            eprintln!(
+                "{name}, a = {a}: run-out {:.3}, height {:.3}, {:.1} s",
+                r.normalized_runout, r.normalized_height, r.seconds
+            );
+            let ratio = law
+                .runout(a)
+                .map_or("–".into(), |l| format!("{:.3}", r.normalized_runout / l));
+            writeln!(
+                md,
+                "| {name} | {a} | {:.3} | {ratio} | {:.3} | {:.3} | {:.1e} | {:.1e} | {} | {:.0} |",
+                r.normalized_runout,
+                r.normalized_height,
+                r.normalized_height / law.final_height(a),
+                r.final_kinetic,
+                r.worst_yield,
+                r.steps,
+                r.seconds
+            )?;
+            rows.push(r);
+        }
+        let (run_exp, h_exp) = exponents_of(&rows);
+        writeln!(
+            exponents,
+            "| {name} | {run_exp:.3} | {:.2} | {h_exp:.3} | {:.2} |",
+            run_exp / 0.73,
+            h_exp * 3.0
+        )?;
+        all.push((name, rows));
+    }
+    writeln!(
+        md,
+        "\n| method | run-out exponent | ratio to 0.73 | height exponent | ratio to 1/3 |"
+    )?;
+    writeln!(md, "|---|---|---|---|---|")?;
+    md.push_str(&exponents);
+    writeln!(md, "\n![run-out and height by method](methods.png)")?;
+    std::fs::write(out.join("methods.md"), md)?;
+    plot_methods(&all, &out.join("methods.png"))
+}
+
+/// Fitted exponents of run-out and final height over a ≥ 1.5.
+fn exponents_of(rows: &[CollapseResult]) -> (f64, f64) {
+    let tall = rows.iter().filter(|r| r.aspect >= 1.5);
+    let run: Vec<(f64, f64)> = tall
+        .clone()
+        .map(|r| (r.aspect, r.normalized_runout))
+        .collect();
+    let height: Vec<(f64, f64)> = tall.map(|r| (r.aspect, r.normalized_height)).collect();
+    (slope(&run), slope(&height))
+}
+
+/// Run-out and height of every method against the laws.
+fn plot_methods(
+    all: &[(&str, Vec<CollapseResult>)],
+    path: &Path,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let root = BitMapBackend::new(path, (900, 650)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Column collapse by method (lines: measured laws)",
+            ("sans-serif", 22),
+        )
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d((0.4f64..5.0).log_scale(), (0.2f64..30.0).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("aspect ratio a = H0/L0")
+        .y_desc("(L∞ − L0)/L0 (circles) and H∞/L0 (triangles)")
+        .draw()?;
+    let law = NGUYEN_BUI_FUKAGAWA;
+    let grid: Vec<f64> = (0..=60)
+        .map(|k| 0.65 * (5.0f64 / 0.65).powf(k as f64 / 60.0))
+        .collect();
+    chart.draw_series(LineSeries::new(
+        grid.iter().map(|&a| (a, law.runout(a).unwrap())),
+        BLACK.stroke_width(2),
+    ))?;
+    chart.draw_series(LineSeries::new(
+        grid.iter().map(|&a| (a, law.final_height(a))),
+        BLACK.stroke_width(2),
+    ))?;
+    let colours = [BLUE, CYAN, RED, MAGENTA];
+    for ((name, rows), colour) in all.iter().zip(colours) {
+        chart
+            .draw_series(LineSeries::new(
+                rows.iter().map(|r| (r.aspect, r.normalized_runout)),
+                colour.stroke_width(1),
+            ))?
+            .label(*name)
+            .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.filled()));
+        chart.draw_series(
+            rows.iter()
+                .map(|r| Circle::new((r.aspect, r.normalized_runout), 5, colour.filled())),
+        )?;
+        chart.draw_series(LineSeries::new(
+            rows.iter().map(|r| (r.aspect, r.normalized_height)),
+            colour.stroke_width(1),
+        ))?;
+        chart
+            .draw_series(rows.iter().map(|r| {
+                TriangleMarker::new((r.aspect, r.normalized_height), 6, colour.filled())
+            }))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
     Ok(())
 }
 
@@ -118,19 +277,7 @@ fn write_tables(
             r.seconds
         )?;
     }
-    let tall: Vec<&CollapseResult> = rows.iter().filter(|r| r.aspect >= 1.5).collect();
-    let run_exp = slope(
-        &tall
-            .iter()
-            .map(|r| (r.aspect, r.normalized_runout))
-            .collect::<Vec<_>>(),
-    );
-    let h_exp = slope(
-        &tall
-            .iter()
-            .map(|r| (r.aspect, r.normalized_height))
-            .collect::<Vec<_>>(),
-    );
+    let (run_exp, h_exp) = exponents_of(rows);
     writeln!(md, "\nFitted exponents over a ≥ 1.5: run-out {run_exp:.3} (law 0.73, ratio {:.2}); final height H∞/L0 {h_exp:.3} (law 1/3, ratio {:.2}).", run_exp / 0.73, h_exp / (1.0 / 3.0))?;
     writeln!(md, "\nThe yield function after the return mapping never exceeds round-off: largest f/E at the end over all runs {:.1e}.", rows.iter().map(|r| r.worst_yield).fold(f64::NEG_INFINITY, f64::max))?;
     writeln!(

@@ -46,7 +46,7 @@ pub type RkmpmIntegration = u32;
 pub const RKMPM_INTEGRATION_MP: RkmpmIntegration = 0;
 /// Variationally consistent integration of order `vc_order` (1..4): test-function gradients
 /// corrected so the divergence equality of that order holds (needs boundary points; without any,
-/// they are generated from the particle lattice at the first step).
+/// the surface of the particles is found afresh at every step, so a body may break apart).
 pub const RKMPM_INTEGRATION_VC: RkmpmIntegration = 1;
 
 /// Particle-grid velocity transfer (`rkmpm_sim_set_transfer`).
@@ -849,7 +849,8 @@ unsafe fn add_particles<const D: usize>(
 /// grid), `area_normals` (`count * dim`, outward normal times area; length in 2D; non-zero) and
 /// `tractions` (`count * dim`, force per current area, or NULL for none). They move with the grid,
 /// update their normals by Nanson's formula, carry the tractions and close VC integration's
-/// divergence equality. All or nothing.
+/// divergence equality. All or nothing. Without any, VC finds the surface of the particles at
+/// every step.
 ///
 /// # Safety
 /// `sim` must be a live handle; the arrays must hold the stated number of values.
@@ -886,7 +887,9 @@ unsafe fn add_boundary_points<const D: usize>(
     Ok(())
 }
 
-/// Writes to `*out_count` the number of boundary points.
+/// Writes to `*out_count` the number of boundary points VC integrated over in the last step: the
+/// given ones, or without any those found on the surface of the particles at the start of that
+/// step (0 before the first step).
 ///
 /// # Safety
 /// `sim` must be a live handle; `out_count` valid for a write.
@@ -900,7 +903,7 @@ pub unsafe extern "C" fn rkmpm_sim_boundary_point_count(
         write_out(
             "out_count",
             out_count,
-            with_sim!(&s.sim, m => m.boundary_points().len()),
+            with_sim!(&s.sim, m => m.vc_surface().len()),
         )
     })
 }

@@ -138,49 +138,18 @@ impl<const D: usize> Sim<D> {
                 ),
             ));
         }
-        let generate = self.vc.is_some() && self.boundary.is_empty() && self.steps == 0;
-        if generate {
-            // VC needs the surface: take it from the particle lattice (documented).
-            let (mut x, na) = BoundaryPoints::from_lattice(
-                &self.particles.position,
-                &self.particles.reference_volume,
-            );
-            // A face on the domain's edge (a body against a wall or symmetry plane) may land a
-            // hair outside it: the spacing V^(1/dim) is rounded. Such points go onto the edge.
-            let (lo, hi) = (self.grid.origin, self.grid.upper());
-            let tol = 1e-9 * self.grid.cell_size;
-            for p in x.iter_mut() {
-                for a in 0..D {
-                    if p[a] < lo[a] && p[a] >= lo[a] - tol {
-                        p[a] = lo[a];
-                    } else if p[a] > hi[a] && p[a] <= hi[a] + tol {
-                        p[a] = hi[a];
-                    }
-                }
-            }
-            if let Some(b) = x.iter().position(|x| !self.grid.contains(x)) {
-                return Err(Error::new(
-                    ErrorKind::OutsideGrid,
-                    format!(
-                        "VC boundary point {b} found from the particle lattice lies outside the \
-                         grid (a particle face at spacing V^(1/dim) crosses the domain's edge); \
-                         keep particles half a spacing inside or give boundary points with \
-                         rkmpm_sim_add_boundary_points"
-                    ),
-                ));
-            }
-            self.boundary.add(&x, &na, None)?;
-        }
+        // The surface VC finds from the particles this step replaces the last one, which a
+        // rejected step restores.
+        let last_surface = std::mem::take(&mut self.surface);
         let result = self.compute_step(dt);
+        if result.is_err() {
+            self.surface = last_surface;
+        }
         let mut clock = std::time::Instant::now();
         self.work.active_nodes = self.work.nodes.active.len();
         self.work.nodes.reset();
         for b in self.work.bodies.iter_mut() {
             b.reset();
-        }
-        if result.is_err() && generate {
-            // A rejected step leaves everything as it was, the boundary points included.
-            self.boundary = BoundaryPoints::default();
         }
         result?;
         self.commit();
@@ -363,8 +332,29 @@ impl<const D: usize> Sim<D> {
             None => None,
         };
 
-        // Boundary points, only when VC or tractions need them.
-        let boundary = &self.boundary;
+        // Boundary points, only when VC or tractions need them: the given ones, or for VC
+        // without any the surface of the particles as they are now.
+        let found = self.vc.is_some() && self.boundary.is_empty();
+        if found {
+            let (lo, hi) = (grid.origin, grid.upper());
+            let (mut x, na) = BoundaryPoints::of_particles(
+                (&lo, &hi),
+                &ps.position,
+                &ps.reference_volume,
+                &ps.deformation_gradient,
+            );
+            // A face on the domain's edge (a body against a wall or symmetry plane) may land a
+            // little outside it: the spacing V^(1/dim) is rounded, and F carries the face. Such
+            // points go onto the edge.
+            for p in x.iter_mut() {
+                for a in 0..D {
+                    p[a] = p[a].clamp(lo[a], hi[a]);
+                }
+            }
+            self.surface = BoundaryPoints::default();
+            self.surface.add(&x, &na, None)?;
+        }
+        let boundary = if found { &self.surface } else { &self.boundary };
         let with_boundary = self.vc.is_some() || boundary.has_tractions();
         if with_boundary {
             work.boundary_stencils
@@ -555,7 +545,7 @@ impl<const D: usize> Sim<D> {
         // Boundary points move with the grid like massless particles; Nanson for n a.
         let mut boundary_updates = std::mem::take(&mut work.boundary_updates);
         boundary_updates.clear();
-        if with_boundary {
+        if with_boundary && !found {
             let nodes = &work.nodes;
             let bs = &work.boundary_stencils;
             boundary_updates.extend((0..boundary.len()).map(|b| {

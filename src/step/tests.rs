@@ -428,10 +428,12 @@ fn rk_shape_functions_slot_into_the_step() {
     assert_eq!(sim.steps(), 0);
 }
 
-/// With VC and no boundary points, the first step finds them on the particle lattice; a rejected
-/// first step leaves none behind, a successful one keeps them.
+/// With VC and no boundary points, every step finds the surface of the particles afresh: none
+/// are added to the given boundary points, the surface of an undeformed 4×4 block is its
+/// perimeter (voxels of half a spacing: two points per particle face), closed, and a rejected
+/// step keeps the particles, so the next step finds the same surface.
 #[test]
-fn lattice_boundary_points_come_with_a_successful_first_step_only() {
+fn vc_finds_the_surface_of_the_particles_at_every_step() {
     let mut sim = Sim::<2>::new([0.0, 0.0], [10, 10], 0.1).unwrap();
     sim.set_integration(crate::sim::Integration::Vc { order: 1 })
         .unwrap();
@@ -448,7 +450,18 @@ fn lattice_boundary_points_come_with_a_successful_first_step_only() {
     assert!(sim.boundary_points().is_empty());
     sim.set_body_force(None);
     sim.step(dt).unwrap();
-    assert_eq!(sim.boundary_points().len(), 16);
+    assert!(sim.boundary_points().is_empty());
+    let s = sim.vc_surface();
+    assert_eq!(s.len(), 32);
+    let sum: Vector<2> = s.area_normal.iter().sum();
+    assert!(sum.norm() < 1e-16, "{sum}");
+    let area: f64 = s.area_normal.iter().map(|n| n.norm()).sum();
+    assert!((area - 0.8).abs() < 1e-14, "{area}");
+    // Every point lies on the block's edge.
+    for p in &s.position {
+        let on = (0..2).any(|a| (p[a] - 0.4).abs() < 1e-12 || (p[a] - 0.6).abs() < 1e-12);
+        assert!(on, "{p}");
+    }
 }
 
 /// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
@@ -705,7 +718,8 @@ fn memory_per_particle_allows_ten_million_particles_in_16_gib() {
 /// A body against the domain's edge under VC: the faces of its lattice lie on the edge, but the
 /// spacing `V^(1/3)` comes out a hair larger than the lattice's (rounding), which put the
 /// generated boundary points just outside and refused the first step (found with the Taylor bar,
-/// whose quarter rod sits on two symmetry planes). Such points now go onto the edge.
+/// whose quarter rod sits on two symmetry planes). Points of the surface found outside the
+/// domain go onto the edge.
 #[test]
 fn vc_body_against_the_domain_edge_steps() {
     let h: f64 = 3.2e-3 / 4.0;
@@ -742,14 +756,15 @@ fn vc_body_against_the_domain_edge_steps() {
         .unwrap();
     let dt = sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
-    let b = sim.boundary_points();
+    let b = sim.vc_surface();
     assert!(!b.is_empty());
     assert!(b.position.iter().all(|p| sim.grid().contains(p)));
-    // The faces on the three planes x, y, z = 0 are on the edge exactly.
+    // The faces on the three planes x, y, z = 0 are on the edge exactly (four voxel faces per
+    // particle face).
     let on_edge = b
         .position
         .iter()
         .filter(|p| p.iter().any(|&c| c == 0.0))
         .count();
-    assert_eq!(on_edge, 3 * n * n);
+    assert_eq!(on_edge, 4 * 3 * n * n);
 }
