@@ -6,6 +6,7 @@ use crate::error::{check_finite, Error, Result};
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Surface quadrature points of all bodies, structure of arrays.
 #[derive(Debug, Default, Clone, PartialEq)]
@@ -144,10 +145,10 @@ impl<const D: usize> BoundaryPoints<D> {
     /// `x_p + F_p [−s/2, s/2]^D`, taken a little larger (`SURFACE_DOMAIN_SCALE`) so that
     /// neighbouring domains that do not quite meet still close. The voxels of side
     /// `v = max_p (J_p V⁰_p)^{1/D} / 2` (aligned with `origin`) whose centres lie in some domain
-    /// and in the box `[origin, upper]` are the body; every voxel face between the body and an empty voxel is a point at the face
-    /// centre with the area normal `±e_a v^{D−1}`. The normals of each piece sum to zero
-    /// exactly, a body that breaks apart gets its new faces, and no point drifts away from the
-    /// material. On an undeformed lattice whose sites are voxel centres this is the surface of
+    /// and in the box `[origin, upper]` are the body; every voxel face between the body and an
+    /// empty voxel is a point at the face centre with the area normal `±e_a v^{D−1}`. The
+    /// normals of each piece sum to zero exactly, a body that breaks apart gets its new faces,
+    /// and no point drifts away from the material. On an undeformed lattice whose sites are voxel centres this is the surface of
     /// [`BoundaryPoints::from_lattice`], split in `2^{D−1}` points per face.
     pub fn of_particles(
         (origin, upper): (&Vector<D>, &Vector<D>),
@@ -155,14 +156,20 @@ impl<const D: usize> BoundaryPoints<D> {
         reference_volumes: &[f64],
         deformation_gradients: &[Matrix<D>],
     ) -> (Vec<Vector<D>>, Vec<Vector<D>>) {
-        let n = positions.len();
-        let spacing = |p: usize| reference_volumes[p].powf(1.0 / D as f64);
-        let v = 0.5
-            * (0..n)
-                .map(|p| {
-                    spacing(p) * crate::determinant(&deformation_gradients[p]).powf(1.0 / D as f64)
-                })
-                .fold(0.0, f64::max);
+        let root = |x: f64| if D == 2 { x.sqrt() } else { x.cbrt() };
+        // Per particle: the half side of its domain in reference coordinates, the map back to
+        // them, and its current spacing.
+        let domains: Vec<(f64, Matrix<D>, f64)> = reference_volumes
+            .par_iter()
+            .zip(deformation_gradients)
+            .map(|(&v0, f)| {
+                let s = root(v0);
+                let j = crate::determinant(f);
+                let inverse = f.try_inverse().unwrap_or_else(Matrix::zeros);
+                (SURFACE_DOMAIN_SCALE * 0.5 * s, inverse, s * root(j.abs()))
+            })
+            .collect();
+        let v = 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
         if !(v > 0.0 && v.is_finite()) {
             return (Vec::new(), Vec::new());
         }
@@ -171,63 +178,225 @@ impl<const D: usize> BoundaryPoints<D> {
         // the work for a particle stretched far.
         let last: [i64; D] =
             std::array::from_fn(|a| ((upper[a] - origin[a]) / v - 0.5).floor() as i64);
-        let mut voxels: Vec<[i64; D]> = (0..n)
-            .into_par_iter()
-            .flat_map_iter(|p| {
-                let (x, f) = (positions[p], deformation_gradients[p]);
-                let half = SURFACE_DOMAIN_SCALE * 0.5 * spacing(p);
-                let to_reference = f.try_inverse().unwrap_or_else(Matrix::zeros);
-                // The domain's bounding box, then the voxel centres inside the domain.
+        // Each particle's range of voxels: its domain's bounding box, cut to the domain.
+        let ranges: Vec<([i64; D], [i64; D])> = positions
+            .par_iter()
+            .zip(deformation_gradients)
+            .zip(&domains)
+            .map(|((x, f), &(half, _, _))| {
                 let extent: [f64; D] =
                     std::array::from_fn(|a| half * (0..D).map(|b| f[(a, b)].abs()).sum::<f64>());
-                let lo: [i64; D] = std::array::from_fn(|a| {
+                let lo = std::array::from_fn(|a| {
                     (((x[a] - extent[a] - origin[a]) / v - 0.5).ceil() as i64).max(0)
                 });
-                let count: [usize; D] = std::array::from_fn(|a| {
-                    let hi = ((x[a] + extent[a] - origin[a]) / v - 0.5).floor() as i64;
-                    (hi.min(last[a]) - lo[a] + 1).max(0) as usize
+                let hi = std::array::from_fn(|a| {
+                    (((x[a] + extent[a] - origin[a]) / v - 0.5).floor() as i64).min(last[a])
                 });
-                let total: usize = count.iter().product();
-                (0..total).filter_map(move |i| {
-                    let mut r = i;
-                    let k: [i64; D] = std::array::from_fn(|a| {
-                        let k = lo[a] + (r % count[a]) as i64;
-                        r /= count[a];
-                        k
-                    });
-                    let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
-                    let xi = to_reference * (centre - x);
-                    xi.iter().all(|c| c.abs() <= half).then_some(k)
-                })
+                (lo, hi)
             })
             .collect();
-        voxels.par_sort_unstable();
-        voxels.dedup();
-        let faces: Vec<Vec<(Vector<D>, Vector<D>)>> = voxels
-            .par_iter()
-            .map(|k| {
-                let mut out = Vec::new();
-                for a in 0..D {
-                    for sign in [-1i64, 1] {
-                        let mut n = *k;
-                        n[a] += sign;
-                        if voxels.binary_search(&n).is_err() {
-                            let centre = Vector::<D>::from_fn(|b, _| {
-                                let c = k[b] as f64
-                                    + 0.5
-                                    + if b == a { 0.5 * sign as f64 } else { 0.0 };
-                                origin[b] + c * v
-                            });
-                            let mut e = Vector::<D>::zeros();
-                            e[a] = sign as f64 * v.powi(D as i32 - 1);
-                            out.push((centre, e));
+        // The body's voxels: the centres inside some particle's domain, visited row by row
+        // along axis 0 (the reference coordinates of the next centre are one step away).
+        let voxels_of = |p: usize, visit: &mut dyn FnMut([i64; D])| {
+            let (lo, hi) = ranges[p];
+            let (half, to_reference, _) = &domains[p];
+            let count: [usize; D] = std::array::from_fn(|a| (hi[a] - lo[a] + 1).max(0) as usize);
+            let step = to_reference.column(0) * v;
+            for row in 0..count[1..].iter().product::<usize>() {
+                let mut k = lo;
+                let mut r = row;
+                for a in 1..D {
+                    k[a] += (r % count[a]) as i64;
+                    r /= count[a];
+                }
+                let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
+                let mut xi = to_reference * (centre - positions[p]);
+                for _ in 0..count[0] {
+                    if xi.iter().all(|c| c.abs() <= *half) {
+                        visit(k);
+                    }
+                    xi += step;
+                    k[0] += 1;
+                }
+            }
+        };
+        let body = VoxelSet::of(&ranges, voxels_of);
+        body.exposed_faces()
+            .into_iter()
+            .map(|(k, a, sign)| {
+                let centre = Vector::<D>::from_fn(|b, _| {
+                    let c = k[b] as f64 + 0.5 + if b == a { 0.5 * sign as f64 } else { 0.0 };
+                    origin[b] + c * v
+                });
+                let mut e = Vector::<D>::zeros();
+                e[a] = sign as f64 * v.powi(D as i32 - 1);
+                (centre, e)
+            })
+            .unzip()
+    }
+}
+
+/// The voxels of a body (integer indices): a dense map of the box the particles' voxel ranges
+/// span when it holds at most `DENSE_VOXELS_PER_PARTICLE` voxels per particle (linear time,
+/// no sorting), otherwise a sorted list (particles far apart, or of very different sizes).
+enum VoxelSet<const D: usize> {
+    Dense {
+        /// The box: `first ..first + dims` per axis, axis 0 fastest in `body`.
+        first: [i64; D],
+        dims: [usize; D],
+        body: Vec<AtomicBool>,
+    },
+    Sparse(Vec<[i64; D]>),
+}
+
+/// See [`VoxelSet`]: the dense map is chosen while it costs at most this many voxels per
+/// particle (a body holds 2^D to 3^D per particle).
+const DENSE_VOXELS_PER_PARTICLE: usize = 64;
+
+impl<const D: usize> VoxelSet<D> {
+    /// The voxels `voxels_of(p, visit)` visits for each particle `p`, all within its range
+    /// `lo..=hi` of `ranges`.
+    fn of(
+        ranges: &[([i64; D], [i64; D])],
+        voxels_of: impl Fn(usize, &mut dyn FnMut([i64; D])) + Sync,
+    ) -> Self {
+        let mut first = [i64::MAX; D];
+        let mut end = [i64::MIN; D];
+        for (lo, hi) in ranges
+            .iter()
+            .filter(|(lo, hi)| (0..D).all(|a| lo[a] <= hi[a]))
+        {
+            // One empty layer around the ranges: every neighbour of a body voxel is in the box.
+            for a in 0..D {
+                first[a] = first[a].min(lo[a] - 1);
+                end[a] = end[a].max(hi[a] + 2);
+            }
+        }
+        if (0..D).any(|a| first[a] >= end[a]) {
+            return VoxelSet::Sparse(Vec::new());
+        }
+        let dims: [usize; D] = std::array::from_fn(|a| (end[a] - first[a]) as usize);
+        let total = dims
+            .iter()
+            .try_fold(1usize, |t, &d| t.checked_mul(d))
+            .filter(|&t| t <= DENSE_VOXELS_PER_PARTICLE * ranges.len());
+        // Visits the voxels of particle `p` that are inside.
+        match total {
+            Some(total) => {
+                let body: Vec<AtomicBool> = (0..total).map(|_| AtomicBool::new(false)).collect();
+                let set = VoxelSet::Dense { first, dims, body };
+                (0..ranges.len()).into_par_iter().for_each(|p| {
+                    voxels_of(p, &mut |k| {
+                        if let (Some(i), VoxelSet::Dense { body, .. }) = (set.index(&k), &set) {
+                            // Only ever set: the map does not depend on the threads' order.
+                            body[i].store(true, Ordering::Relaxed);
                         }
+                    })
+                });
+                set
+            }
+            None => {
+                let mut voxels: Vec<[i64; D]> = (0..ranges.len())
+                    .into_par_iter()
+                    .flat_map_iter(|p| {
+                        let mut list = Vec::new();
+                        voxels_of(p, &mut |k| list.push(k));
+                        list
+                    })
+                    .collect();
+                voxels.par_sort_unstable();
+                voxels.dedup();
+                VoxelSet::Sparse(voxels)
+            }
+        }
+    }
+
+    /// Position of voxel `k` in the dense map, if it lies in its box.
+    fn index(&self, k: &[i64; D]) -> Option<usize> {
+        let VoxelSet::Dense { first, dims, .. } = self else {
+            return None;
+        };
+        let mut i = 0;
+        for a in (0..D).rev() {
+            let r = k[a] - first[a];
+            if r < 0 || r >= dims[a] as i64 {
+                return None;
+            }
+            i = i * dims[a] + r as usize;
+        }
+        Some(i)
+    }
+
+    fn contains(&self, k: &[i64; D]) -> bool {
+        match self {
+            VoxelSet::Dense { body, .. } => self
+                .index(k)
+                .is_some_and(|i| body[i].load(Ordering::Relaxed)),
+            VoxelSet::Sparse(list) => list.binary_search(k).is_ok(),
+        }
+    }
+
+    /// The faces between the body and empty voxels: `(voxel, axis, ±1)`, in a fixed order
+    /// (storage order for the map, sorted order for the list).
+    fn exposed_faces(&self) -> Vec<([i64; D], usize, i64)> {
+        let faces_of = |k: [i64; D], out: &mut Vec<([i64; D], usize, i64)>| {
+            for a in 0..D {
+                for sign in [-1i64, 1] {
+                    let mut n = k;
+                    n[a] += sign;
+                    if !self.contains(&n) {
+                        out.push((k, a, sign));
                     }
                 }
-                out
-            })
-            .collect();
-        faces.into_iter().flatten().unzip()
+            }
+        };
+        let chunks: Vec<Vec<([i64; D], usize, i64)>> = match self {
+            VoxelSet::Sparse(list) => list
+                .par_chunks(1024)
+                .map(|chunk| {
+                    let mut out = Vec::new();
+                    for &k in chunk {
+                        faces_of(k, &mut out);
+                    }
+                    out
+                })
+                .collect(),
+            // Rows along axis 0; a voxel's neighbours are `±stride` away in the map (the empty
+            // layer around the box keeps them inside it).
+            VoxelSet::Dense { first, dims, body } => body
+                .par_chunks(dims[0])
+                .enumerate()
+                .map(|(row, cells)| {
+                    let mut out = Vec::new();
+                    let base = row * dims[0];
+                    let mut k = [0i64; D];
+                    let mut r = row;
+                    for a in 1..D {
+                        k[a] = first[a] + (r % dims[a]) as i64;
+                        r /= dims[a];
+                    }
+                    for (k0, cell) in cells.iter().enumerate() {
+                        if !cell.load(Ordering::Relaxed) {
+                            continue;
+                        }
+                        k[0] = first[0] + k0 as i64;
+                        let i = base + k0;
+                        let mut stride = 1;
+                        for (a, dim) in dims.iter().enumerate() {
+                            for sign in [-1i64, 1] {
+                                let n = if sign < 0 { i - stride } else { i + stride };
+                                if !body[n].load(Ordering::Relaxed) {
+                                    out.push((k, a, sign));
+                                }
+                            }
+                            stride *= dim;
+                        }
+                    }
+                    out
+                })
+                .collect(),
+        };
+        chunks.concat()
     }
 }
 
@@ -397,5 +566,38 @@ mod tests {
             assert!(!inside || depth < 2.0 * v, "{p}: {depth}");
             assert!(inside || depth < 2.0 * v, "{p}: {depth}");
         }
+    }
+
+    /// The dense voxel map (particles close together) and the sorted list (a particle far away
+    /// makes the box too large for the map) find the same surface, in another order.
+    #[test]
+    fn dense_and_sparse_voxel_sets_find_the_same_surface() {
+        let s = 0.02;
+        let f = Matrix::<2>::new(1.1, 0.4, -0.2, 0.9);
+        let mut x: Vec<Vector<2>> = block_2d(12, 7, s, Vector::zeros())
+            .iter()
+            .enumerate()
+            .map(|(k, xr)| {
+                let jitter = 0.1 * s * ((k * 7919 % 13) as f64 / 13.0 - 0.5);
+                Vector::<2>::new(0.5, 0.5) + f * xr + Vector::<2>::new(jitter, -jitter)
+            })
+            .collect();
+        let domain = (&Vector::<2>::zeros(), &Vector::<2>::from_element(1e4));
+        let surface = |x: &[Vector<2>]| {
+            let (p, n) =
+                BoundaryPoints::of_particles(domain, x, &vec![s * s; x.len()], &vec![f; x.len()]);
+            let mut faces: Vec<[f64; 4]> = p
+                .iter()
+                .zip(&n)
+                .map(|(p, n)| [p[0], p[1], n[0], n[1]])
+                .collect();
+            faces.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            faces
+        };
+        let dense = surface(&x);
+        x.push(Vector::<2>::new(5e3, 5e3));
+        let sparse: Vec<[f64; 4]> = surface(&x).into_iter().filter(|p| p[0] < 10.0).collect();
+        assert!(!dense.is_empty());
+        assert_eq!(dense, sparse);
     }
 }

@@ -335,6 +335,7 @@ impl<const D: usize> Sim<D> {
         // Boundary points, only when VC or tractions need them: the given ones, or for VC
         // without any the surface of the particles as they are now.
         let found = self.vc.is_some() && self.boundary.is_empty();
+        work.times.forces_and_vc += lap(&mut clock);
         if found {
             let (lo, hi) = (grid.origin, grid.upper());
             let (mut x, na) = BoundaryPoints::of_particles(
@@ -354,6 +355,7 @@ impl<const D: usize> Sim<D> {
             self.surface = BoundaryPoints::default();
             self.surface.add(&x, &na, None)?;
         }
+        work.times.surface += lap(&mut clock);
         let boundary = if found { &self.surface } else { &self.boundary };
         let with_boundary = self.vc.is_some() || boundary.has_tractions();
         if with_boundary {

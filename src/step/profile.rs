@@ -9,6 +9,8 @@ pub struct PhaseTimes {
     pub bins: f64,
     /// Shape-function values and gradients (and RK moment solves).
     pub shape: f64,
+    /// Finding the surface of the particles (VC without given boundary points).
+    pub surface: f64,
     /// Body forces, boundary points and VC corrections.
     pub forces_and_vc: f64,
     pub particle_to_grid: f64,
@@ -24,10 +26,11 @@ pub struct PhaseTimes {
 
 impl PhaseTimes {
     /// The phases with their names, in step order.
-    pub fn phases(&self) -> [(&'static str, f64); 9] {
+    pub fn phases(&self) -> [(&'static str, f64); 10] {
         [
             ("bins", self.bins),
             ("shape", self.shape),
+            ("surface", self.surface),
             ("forces_vc", self.forces_and_vc),
             ("p2g", self.particle_to_grid),
             ("grid", self.grid_update),
