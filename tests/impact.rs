@@ -35,12 +35,12 @@ fn coarse_taylor_bar_matches_the_reference_shape() {
     assert!(r.max_plastic_strain > 1.0);
 }
 
-/// The same bar with RK1 (ã = 2) and first-order VC, whose boundary points come from the
-/// particle lattice (the rod's faces on the symmetry planes included). Measured at 4 cells:
-/// length 21.79 mm (+1.7%), foot radius 6.43 mm (−9.7%); RK1 without VC +1.8% / −9.9%. RK1 with
-/// ã = 2 is the cubic B-spline, whose wider support rounds the foot more at this coarse grid
-/// (−6.5% at 6 cells, `docs/validation/taylor/methods.md`). Asserted: 3% on the length, 12% on
-/// the radius, the rod stopped and yielded.
+/// The same bar with RK1 (ã = 2) and first-order VC, whose surface is found from the particles
+/// at every step (the rod's faces on the symmetry planes included). Measured at 4 cells:
+/// length 21.94 mm (+2.4%), foot radius 6.38 mm (−10.4%); RK1 without VC +1.8% / −9.9%. RK1
+/// with ã = 2 is the cubic B-spline, whose wider support rounds the foot more at this coarse
+/// grid (`docs/validation/taylor/methods.md` has 6 and 8 cells). Asserted: 3% on the length,
+/// 12% on the radius, the rod stopped and yielded.
 #[test]
 fn coarse_taylor_bar_with_rk_and_vc() {
     use rkmpm::shape::Shape;

@@ -337,14 +337,14 @@ fn a_hundred_thousand_steps_of_an_elastic_body() {
 }
 
 /// A smooth, small-strain block (shear plus compression, the throughput benchmark's block) with
-/// quadratic B-spline + VC and the boundary points found from the particle lattice, 2D and 3D.
+/// quadratic B-spline + VC and the surface found from the particles at every step, 2D and 3D.
 /// Before the internal force of edge nodes was limited for VC (as for signed shapes), the nodes
 /// just outside the block had a tiny mass and a full VC-corrected force, and a boundary point
 /// inverted (here at step 86 in 3D; at steps 74 and 77 for the benchmark's 10^4-particle blocks);
 /// now 150 steps run and the strain stays small (measured largest |F − I|: 0.012 in 2D, 0.17 in
 /// 3D, where the block's corners shear most).
 #[test]
-fn vc_with_lattice_boundary_points_runs_a_smooth_block() {
+fn vc_with_the_found_surface_runs_a_smooth_block() {
     fn run<const D: usize>(m: usize) -> (u64, f64) {
         let pad = 4 + m / 16;
         let cells = m / 2 + 2 * pad;
