@@ -6,7 +6,7 @@
 //! `cargo run --release --example granular_collapse [-- --quick]` (about 2 minutes; `--quick`
 //! runs 8 cells across the column instead of 16).
 //!
-//! `cargo run --release --example granular_collapse -- --methods` (about 15 minutes) runs the
+//! `cargo run --release --example granular_collapse -- --methods` (about 8 minutes) runs the
 //! same aspect ratios with the quadratic B-spline and RK1 (ã = 2), each with material-point and
 //! first-order VC integration, and writes `methods.md` and `methods.png` there instead (issue 4:
 //! "use RK + VC and show the difference").

@@ -409,23 +409,24 @@ const SURFACE_DOMAIN_SCALE: f64 = 1.2;
 mod tests {
     use super::*;
 
+    /// Particles on a lattice of spacing 0.1 filling the box [0, 0.5] × [0, 0.4] × [0, 0.3].
+    fn box_5_4_3() -> Vec<Vector<3>> {
+        (0..60)
+            .map(|k| {
+                Vector::<3>::new(
+                    (k % 5) as f64 + 0.5,
+                    (k / 5 % 4) as f64 + 0.5,
+                    (k / 20) as f64 + 0.5,
+                ) * 0.1
+            })
+            .collect()
+    }
+
     /// The lattice surface of a box: the normals of a closed surface sum to zero, and the total
     /// area is the box's surface area.
     #[test]
     fn lattice_surface_of_a_box() {
-        let s = 0.1;
-        let mut x = Vec::new();
-        for k in 0..3 {
-            for j in 0..4 {
-                for i in 0..5 {
-                    x.push(Vector::<3>::new(
-                        (i as f64 + 0.5) * s,
-                        (j as f64 + 0.5) * s,
-                        (k as f64 + 0.5) * s,
-                    ));
-                }
-            }
-        }
+        let (s, x) = (0.1, box_5_4_3());
         let (pts, normals) = BoundaryPoints::from_lattice(&x, &vec![s * s * s; x.len()]);
         assert_eq!(pts.len(), 2 * (5 * 4 + 4 * 3 + 5 * 3));
         let sum: Vector<3> = normals.iter().sum();
@@ -457,19 +458,7 @@ mod tests {
     /// [`BoundaryPoints::from_lattice`]: the same area, on the same faces, closed.
     #[test]
     fn surface_of_an_undeformed_box_is_its_lattice_surface() {
-        let s = 0.1;
-        let mut x = Vec::new();
-        for k in 0..3 {
-            for j in 0..4 {
-                for i in 0..5 {
-                    x.push(Vector::<3>::new(
-                        (i as f64 + 0.5) * s,
-                        (j as f64 + 0.5) * s,
-                        (k as f64 + 0.5) * s,
-                    ));
-                }
-            }
-        }
+        let (s, x) = (0.1, box_5_4_3());
         let vol = vec![s * s * s; x.len()];
         let f = vec![Matrix::<3>::identity(); x.len()];
         let (pts, normals) = BoundaryPoints::of_particles(
