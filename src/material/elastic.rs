@@ -115,7 +115,7 @@ impl NeoHookean {
     /// The `D×D` block of the Cauchy stress and the pressure for a `D×D` deformation gradient
     /// with `j = det f > 0` (plane strain in 2D), without the 3×3 embedding: the same values as
     /// [`Constitutive::cauchy_stress`].
-    #[inline]
+    #[inline(always)]
     pub fn stress_block<const D: usize>(&self, f: &Matrix<D>, j: f64) -> (Matrix<D>, f64) {
         let b = f * f.transpose();
         let shear = self.0.mu / j;

@@ -246,7 +246,7 @@ impl Material {
     /// `D×D` deformation gradient `f` with `j = det f > 0`. Linear elastic and neo-Hookean
     /// work on the block directly (no 3×3 embedding); the others go through
     /// [`Constitutive::cauchy_stress`].
-    #[inline]
+    #[inline(always)]
     pub fn elastic_stress<const D: usize>(
         &self,
         f: &crate::Matrix<D>,
