@@ -11,6 +11,7 @@
 //! first-order VC integration, and writes `methods.md` and `methods.png` there instead (issue 4:
 //! "use RK + VC and show the difference").
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
@@ -152,18 +153,19 @@ fn exponents_of(rows: &[CollapseResult]) -> (f64, f64) {
     (slope(&run), slope(&height))
 }
 
-/// Run-out and height of every method against the laws.
-fn plot_methods(
-    all: &[(&str, Vec<CollapseResult>)],
-    path: &Path,
-) -> Result<(), Box<dyn std::error::Error>> {
-    let root = BitMapBackend::new(path, (900, 650)).into_drawing_area();
+/// The log-log axes of run-out and height against the aspect ratio.
+type LawChart<'a, 'b> =
+    ChartContext<'b, BitMapBackend<'a>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>;
+
+/// A log-log chart of run-out and height against the aspect ratio on a white `root`.
+fn law_chart<'a, 'b>(
+    root: &'b DrawingArea<BitMapBackend<'a>, Shift>,
+    caption: &str,
+    y_desc: &str,
+) -> Result<LawChart<'a, 'b>, Box<dyn std::error::Error>> {
     root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Column collapse by method (lines: measured laws)",
-            ("sans-serif", 22),
-        )
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, ("sans-serif", 22))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
@@ -171,20 +173,37 @@ fn plot_methods(
     chart
         .configure_mesh()
         .x_desc("aspect ratio a = H0/L0")
-        .y_desc("(L∞ − L0)/L0 (circles) and H∞/L0 (triangles)")
+        .y_desc(y_desc)
         .draw()?;
+    Ok(chart)
+}
+
+/// The measured laws of run-out and height as curves over a = 0.65 … 5.
+fn law_curves() -> [Vec<(f64, f64)>; 2] {
     let law = NGUYEN_BUI_FUKAGAWA;
     let grid: Vec<f64> = (0..=60)
         .map(|k| 0.65 * (5.0f64 / 0.65).powf(k as f64 / 60.0))
         .collect();
-    chart.draw_series(LineSeries::new(
-        grid.iter().map(|&a| (a, law.runout(a).unwrap())),
-        BLACK.stroke_width(2),
-    ))?;
-    chart.draw_series(LineSeries::new(
-        grid.iter().map(|&a| (a, law.final_height(a))),
-        BLACK.stroke_width(2),
-    ))?;
+    [
+        grid.iter().map(|&a| (a, law.runout(a).unwrap())).collect(),
+        grid.iter().map(|&a| (a, law.final_height(a))).collect(),
+    ]
+}
+
+/// Run-out and height of every method against the laws.
+fn plot_methods(
+    all: &[(&str, Vec<CollapseResult>)],
+    path: &Path,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let root = BitMapBackend::new(path, (900, 650)).into_drawing_area();
+    let mut chart = law_chart(
+        &root,
+        "Column collapse by method (lines: measured laws)",
+        "(L∞ − L0)/L0 (circles) and H∞/L0 (triangles)",
+    )?;
+    let [runout_law, height_law] = law_curves();
+    chart.draw_series(LineSeries::new(runout_law, BLACK.stroke_width(2)))?;
+    chart.draw_series(LineSeries::new(height_law, BLACK.stroke_width(2)))?;
     let colours = [BLUE, CYAN, RED, MAGENTA];
     for ((name, rows), colour) in all.iter().zip(colours) {
         chart
@@ -291,37 +310,18 @@ fn write_tables(
 
 fn plot(rows: &[CollapseResult], path: &Path) -> Result<(), Box<dyn std::error::Error>> {
     let root = BitMapBackend::new(path, (900, 650)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Column collapse: rkmpm against Nguyen, Bui & Fukagawa (2015)",
-            ("sans-serif", 22),
-        )
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d((0.4f64..5.0).log_scale(), (0.2f64..30.0).log_scale())?;
+    let mut chart = law_chart(
+        &root,
+        "Column collapse: rkmpm against Nguyen, Bui & Fukagawa (2015)",
+        "(L∞ − L0)/L0 and H∞/L0",
+    )?;
+    let [runout_law, height_law] = law_curves();
     chart
-        .configure_mesh()
-        .x_desc("aspect ratio a = H0/L0")
-        .y_desc("(L∞ − L0)/L0 and H∞/L0")
-        .draw()?;
-    let law = NGUYEN_BUI_FUKAGAWA;
-    let grid: Vec<f64> = (0..=60)
-        .map(|k| 0.65 * (5.0f64 / 0.65).powf(k as f64 / 60.0))
-        .collect();
-    chart
-        .draw_series(LineSeries::new(
-            grid.iter().map(|&a| (a, law.runout(a).unwrap())),
-            BLUE.stroke_width(2),
-        ))?
+        .draw_series(LineSeries::new(runout_law, BLUE.stroke_width(2)))?
         .label("run-out, measured law")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(2)));
     chart
-        .draw_series(LineSeries::new(
-            grid.iter().map(|&a| (a, law.final_height(a))),
-            RED.stroke_width(2),
-        ))?
+        .draw_series(LineSeries::new(height_law, RED.stroke_width(2)))?
         .label("final height, measured law")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
     chart

@@ -148,7 +148,9 @@ impl<const D: usize> BoundaryPoints<D> {
     /// and in the box `[origin, upper]` are the body; every voxel face between the body and an
     /// empty voxel is a point at the face centre with the area normal `±e_a v^{D−1}`. The
     /// normals of each piece sum to zero exactly, a body that breaks apart gets its new faces,
-    /// and no point drifts away from the material. On an undeformed lattice whose sites are voxel centres this is the surface of
+    /// and no point drifts away from the material. A face of a voxel at the box's edge may lie
+    /// beyond it (a body against a wall or symmetry plane): its point goes onto the edge. On an
+    /// undeformed lattice whose sites are voxel centres this is the surface of
     /// [`BoundaryPoints::from_lattice`], split in `2^{D−1}` points per face.
     pub fn of_particles(
         (origin, upper): (&Vector<D>, &Vector<D>),
@@ -226,7 +228,7 @@ impl<const D: usize> BoundaryPoints<D> {
             .map(|(k, a, sign)| {
                 let centre = Vector::<D>::from_fn(|b, _| {
                     let c = k[b] as f64 + 0.5 + if b == a { 0.5 * sign as f64 } else { 0.0 };
-                    origin[b] + c * v
+                    (origin[b] + c * v).clamp(origin[b], upper[b])
                 });
                 let mut e = Vector::<D>::zeros();
                 e[a] = sign as f64 * v.powi(D as i32 - 1);
@@ -280,19 +282,21 @@ impl<const D: usize> VoxelSet<D> {
             .iter()
             .try_fold(1usize, |t, &d| t.checked_mul(d))
             .filter(|&t| t <= DENSE_VOXELS_PER_PARTICLE * ranges.len());
-        // Visits the voxels of particle `p` that are inside.
         match total {
             Some(total) => {
                 let body: Vec<AtomicBool> = (0..total).map(|_| AtomicBool::new(false)).collect();
                 let set = VoxelSet::Dense { first, dims, body };
-                (0..ranges.len()).into_par_iter().for_each(|p| {
-                    voxels_of(p, &mut |k| {
-                        if let (Some(i), VoxelSet::Dense { body, .. }) = (set.index(&k), &set) {
+                if let VoxelSet::Dense { body, .. } = &set {
+                    (0..ranges.len()).into_par_iter().for_each(|p| {
+                        voxels_of(p, &mut |k| {
+                            // Every visited voxel lies in its particle's range, so in the box.
                             // Only ever set: the map does not depend on the threads' order.
-                            body[i].store(true, Ordering::Relaxed);
-                        }
-                    })
-                });
+                            if let Some(i) = set.index(&k) {
+                                body[i].store(true, Ordering::Relaxed);
+                            }
+                        })
+                    });
+                }
                 set
             }
             None => {

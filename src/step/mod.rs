@@ -337,21 +337,12 @@ impl<const D: usize> Sim<D> {
         let found = self.vc.is_some() && self.boundary.is_empty();
         work.times.forces_and_vc += lap(&mut clock);
         if found {
-            let (lo, hi) = (grid.origin, grid.upper());
-            let (mut x, na) = BoundaryPoints::of_particles(
-                (&lo, &hi),
+            let (x, na) = BoundaryPoints::of_particles(
+                (&grid.origin, &grid.upper()),
                 &ps.position,
                 &ps.reference_volume,
                 &ps.deformation_gradient,
             );
-            // A face on the domain's edge (a body against a wall or symmetry plane) may land a
-            // little outside it: the spacing V^(1/dim) is rounded, and F carries the face. Such
-            // points go onto the edge.
-            for p in x.iter_mut() {
-                for a in 0..D {
-                    p[a] = p[a].clamp(lo[a], hi[a]);
-                }
-            }
             self.surface = BoundaryPoints::default();
             self.surface.add(&x, &na, None)?;
         }
