@@ -175,6 +175,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 &boundary,
                 &boundary_stencils,
                 &mut nodes,
+                None,
             )
         })
     });

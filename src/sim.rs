@@ -231,7 +231,8 @@ impl<const D: usize> Sim<D> {
 
     /// Turns on contact between bodies (every material is a body with its own velocity field;
     /// see [`crate::contact`]) with Coulomb friction `friction ≥ 0`, or off with `None`. Before
-    /// stepping only; not with VC, boundary points or MUSL.
+    /// stepping only; not with given boundary points or MUSL. With VC each deformable body gets
+    /// its own correction, over its own particles and the surface found from them.
     pub fn set_contact(&mut self, friction: Option<f64>) -> Result<()> {
         self.before_stepping("contact")?;
         if let Some(mu) = friction {
@@ -326,6 +327,29 @@ impl<const D: usize> Sim<D> {
     pub fn add_material(&mut self, material: Material) -> u32 {
         self.materials.push(material);
         (self.materials.len() - 1) as u32
+    }
+
+    /// Gives the Drucker–Prager material `material` the μ(I) rate dependence of its friction, or
+    /// takes it away with `None`. May change between steps. Fails for an unknown material or one
+    /// that is not Drucker–Prager.
+    pub fn set_rheology(
+        &mut self,
+        material: u32,
+        rheology: Option<crate::material::InertialRheology>,
+    ) -> Result<()> {
+        let count = self.materials.len();
+        match self.materials.get_mut(material as usize) {
+            Some(Material::DruckerPrager(soil)) => {
+                soil.rheology = rheology;
+                Ok(())
+            }
+            Some(_) => Err(Error::invalid(format!(
+                "material {material} is not Drucker–Prager; only its friction has a μ(I) rheology"
+            ))),
+            None => Err(Error::invalid(format!(
+                "material {material} does not exist ({count} materials)"
+            ))),
+        }
     }
 
     /// Adds particles of one material. All-or-nothing: on any error no particle is added.

@@ -493,6 +493,86 @@ fn drucker_prager_soil_through_the_c_api() {
     }
 }
 
+/// The μ(I) rheology from C: the slumping block of the test above flows less with it (the
+/// friction only rises with the shear rate); turned on and off again before stepping it leaves
+/// the run bit for bit as without; an elastic material or an unknown id is refused.
+#[test]
+fn drucker_prager_rheology_through_the_c_api() {
+    // Total plastic strain of the block after 300 steps: `switch` 0 none, 1 on, 2 on then off.
+    let slump = |switch: u32| unsafe {
+        let mut sim = null_mut();
+        let (origin, cells) = ([0.0, 0.0], [24usize, 10]);
+        assert_eq!(
+            rkmpm_sim_new(2, origin.as_ptr(), cells.as_ptr(), 0.1, &mut sim),
+            RKMPM_OK
+        );
+        let (mut soil, mut rubber) = (u32::MAX, u32::MAX);
+        assert_eq!(
+            rkmpm_sim_add_material_drucker_prager(sim, 2650.0, 1e6, 0.3, 20.0, 0.0, 0.0, &mut soil),
+            RKMPM_OK
+        );
+        assert_eq!(
+            rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e5, 0.3, &mut rubber),
+            RKMPM_OK
+        );
+        for (material, status, what) in [
+            (rubber, RKMPM_ERR_INVALID_ARGUMENT, "not Drucker"),
+            (7, RKMPM_ERR_INVALID_ARGUMENT, "does not exist"),
+        ] {
+            assert_eq!(
+                rkmpm_sim_set_drucker_prager_rheology(sim, material, 1, 0.5, 0.28, 1e-2),
+                status
+            );
+            assert!(last_error().contains(what), "{}", last_error());
+        }
+        if switch > 0 {
+            assert_eq!(
+                rkmpm_sim_set_drucker_prager_rheology(sim, soil, 1, 0.5, 0.28, 1e-2),
+                RKMPM_OK
+            );
+        }
+        if switch > 1 {
+            assert_eq!(
+                rkmpm_sim_set_drucker_prager_rheology(sim, soil, 0, f64::NAN, 0.0, 0.0),
+                RKMPM_OK
+            );
+        }
+        assert_eq!(
+            rkmpm_sim_set_boundary(sim, 1, -1, RKMPM_BOUNDARY_FRICTION, 0.4),
+            RKMPM_OK
+        );
+        let g = [0.0, -9.81];
+        assert_eq!(rkmpm_sim_set_gravity(sim, g.as_ptr()), RKMPM_OK);
+        let x: Vec<f64> = (0..64)
+            .flat_map(|k| [1.025 + 0.05 * (k % 8) as f64, 0.025 + 0.05 * (k / 8) as f64])
+            .collect();
+        let vol = [0.0025; 64];
+        assert_eq!(
+            rkmpm_sim_add_particles(sim, soil, 64, x.as_ptr(), vol.as_ptr(), null()),
+            RKMPM_OK
+        );
+        let mut dt = 0.0;
+        assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+        for _ in 0..300 {
+            assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK, "{}", last_error());
+        }
+        let mut eps = vec![-1.0; 64];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_PLASTIC_STRAIN, eps.as_mut_ptr(), 64),
+            RKMPM_OK
+        );
+        rkmpm_sim_free(sim);
+        eps.iter().sum::<f64>()
+    };
+    let (none, on, off) = (slump(0), slump(1), slump(2));
+    eprintln!("total plastic strain: without μ(I) {none}, with {on}");
+    assert_eq!(off.to_bits(), none.to_bits());
+    assert!(
+        on > 0.0 && on < 0.95 * none,
+        "μ(I) did not slow the flow: {on} against {none}"
+    );
+}
+
 /// Johnson–Cook through the C API: a bad flag and a NULL struct are refused; a copper block hit
 /// against a slip floor at 300 m/s flows plastically, heats up and accumulates damage in [0, 1].
 #[test]

@@ -80,7 +80,8 @@ fn rk2_vc2_block_on_walls_musl() {
     restart_is_bit_identical("rk2", build, 9, 11);
 }
 
-/// Drucker–Prager history (F_e, plastic strain) on a friction floor.
+/// Drucker–Prager history (F_e, plastic strain) on a friction floor, rate-independent and with
+/// the μ(I) rheology (stored under its own material tag).
 #[test]
 fn soil_collapse() {
     let column = GranularColumn {
@@ -88,6 +89,11 @@ fn soil_collapse() {
         ..Default::default()
     };
     restart_is_bit_identical("soil", || column.build().unwrap(), 150, 150);
+    let flowing = GranularColumn {
+        rheology: Some(rkmpm::material::InertialRheology::new(0.26, 0.28, 1.25e-3).unwrap()),
+        ..column
+    };
+    restart_is_bit_identical("soil_mu_i", || flowing.build().unwrap(), 150, 150);
 }
 
 /// Johnson–Cook (heating, rate) in 3D and Johnson–Cook damage with contact in plane strain.

@@ -66,9 +66,12 @@ fn coarse_taylor_bar_with_rk_and_vc() {
 
 /// Plane-strain penetration at 6 cells through the plate (1160 particles, a few seconds):
 /// measured: 150 m/s stops (rebound −11 m/s, 12 failed plate particles), 350 m/s perforates
-/// (residual 172 m/s). Asserted: the slow shot does not perforate and the fast one does with a
-/// residual speed between zero and the impact speed; damage stays in [0, 1] and some plate
-/// particles fail; mass is carried by the particles unchanged.
+/// (residual 172 m/s). At this size both tear the 60 mm strip off its clamp (the plate cut off
+/// is 3 times the mass under the projectile: all of it) rather than shear out a plug; the slow
+/// projectile still rebounds off the torn strip. Asserted: the slow shot does not perforate and the fast one
+/// does with a residual speed between zero and the impact speed, and plate material was cut
+/// off from the clamp; damage stays in [0, 1] and some plate particles fail; mass is carried
+/// by the particles unchanged.
 #[test]
 fn plane_strain_penetration_perforates_fast_and_stops_slow() {
     use rkmpm::scenes::Penetration;
@@ -84,6 +87,7 @@ fn plane_strain_penetration_perforates_fast_and_stops_slow() {
         assert_eq!(r.perforated, through, "{v} m/s");
         if through {
             assert!(r.residual_speed > 0.0 && r.residual_speed < v);
+            assert!(r.separated_mass > 1.0, "{r:?}");
         }
         assert!(r.max_damage <= 1.0 && r.failed_particles > 0);
         let ps = sim.particles();

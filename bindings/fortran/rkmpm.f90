@@ -176,6 +176,7 @@ module rkmpm
       procedure :: add_material_johnson_cook => sim_add_material_johnson_cook
       procedure :: add_material_rigid => sim_add_material_rigid
       procedure :: set_contact => sim_set_contact
+      procedure :: set_drucker_prager_rheology => sim_set_drucker_prager_rheology
       procedure :: save => sim_save
       procedure :: load => sim_load
       procedure :: add_particles => sim_add_particles
@@ -398,6 +399,21 @@ module rkmpm
          integer(c_int32_t), value :: enabled
          real(c_double), value :: friction
       end function rkmpm_sim_set_contact
+
+      ! enum RkmpmStatus rkmpm_sim_set_drucker_prager_rheology(struct RkmpmSim *sim, uint32_t material,
+      !     uint32_t enabled, double friction_increase, double reference_inertial_number,
+      !     double grain_diameter);
+      integer(c_int) function rkmpm_sim_set_drucker_prager_rheology(sim, material, enabled, &
+            friction_increase, reference_inertial_number, grain_diameter) &
+         bind(C, name="rkmpm_sim_set_drucker_prager_rheology")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: material
+         integer(c_int32_t), value :: enabled
+         real(c_double), value :: friction_increase
+         real(c_double), value :: reference_inertial_number
+         real(c_double), value :: grain_diameter
+      end function rkmpm_sim_set_drucker_prager_rheology
 
       ! enum RkmpmStatus rkmpm_sim_add_particles(struct RkmpmSim *sim, uint32_t material, size_t count,
       !                                          const double *positions, const double *volumes,
@@ -955,6 +971,27 @@ contains
       call report(rkmpm_sim_set_contact(self%h, on, friction), 'set_contact', stat, text)
       if (present(errmsg)) errmsg = text
    end subroutine sim_set_contact
+
+   !> Gives the Drucker-Prager `material` the mu(I) rate dependence of its friction
+   !> (enabled = .true.: friction_increase >= 0, reference_inertial_number > 0, grain_diameter > 0
+   !> in m) or takes it away; may change between steps. See the C header.
+   subroutine sim_set_drucker_prager_rheology(self, material, enabled, friction_increase, &
+                                              reference_inertial_number, grain_diameter, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: material
+      logical, intent(in) :: enabled
+      real(c_double), intent(in) :: friction_increase, reference_inertial_number, grain_diameter
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: on
+      on = 0
+      if (enabled) on = 1
+      call report(rkmpm_sim_set_drucker_prager_rheology(self%h, material, on, friction_increase, &
+                                                        reference_inertial_number, grain_diameter), &
+                  'set_drucker_prager_rheology', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_drucker_prager_rheology
 
    !> Adds size(x, 2) particles of `material`: positions x(dim, n), volumes(n) and optional
    !> velocities(dim, n) (at rest when absent). All or nothing.

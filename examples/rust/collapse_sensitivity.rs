@@ -10,11 +10,15 @@
 //! * `--rods 2008|2015`: Bui et al. (2008) rods (ρ 2650, E 0.84 MPa, φ 19.8°, default) or the
 //!   set used with the later rod experiments (ρ 2040, E 5.84 MPa, φ 21.9°).
 //! * `--floor MU`: floor friction coefficient (default tan φ).
+//! * `--young E`: Young's modulus (Pa; default that of the rods' set).
 //! * `--method bspline2|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1 (ã = 2),
 //!   with material-point integration or VC of order 1 (the surface found from the particles at
 //!   every step).
+//! * `--rheology d,Δμ,I0`: the μ(I) rate dependence of the friction (grain diameter in m, the
+//!   friction gained at large inertial numbers, the reference inertial number); none by default.
 
 use rkmpm::boundary::Boundary;
+use rkmpm::material::InertialRheology;
 use rkmpm::scenes::{GranularColumn, NGUYEN_BUI_FUKAGAWA};
 use rkmpm::{Integration, Shape};
 
@@ -45,6 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         other => return Err(format!("--rods 2008|2015, got {other}").into()),
     }
+    base.young = value("--young").map_or(Ok(base.young), |v| v.parse())?;
     let mu = base.friction_degrees.to_radians().tan();
     base.floor_friction = value("--floor").map_or(Ok(mu), |v| v.parse())?;
     let wall = value("--wall").unwrap_or_else(|| "slip".into());
@@ -68,9 +73,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             return Err(format!("--method bspline2|bspline2-vc|rk1|rk1-vc, got {other}").into())
         }
     };
+    if let Some(r) = value("--rheology") {
+        let v: Vec<f64> = r.split(',').map(str::parse).collect::<Result<_, _>>()?;
+        if v.len() != 3 {
+            return Err("--rheology d,Δμ,I0".into());
+        }
+        base.rheology = Some(InertialRheology::new(v[1], v[2], v[0])?);
+    }
     println!(
-        "cells {cells}, wall {wall}, rods {rods}, floor μ {:.3}, method {method}\n",
-        base.floor_friction
+        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, floor μ {:.3}, method {method}, rheology {:?}\n",
+        base.young, base.floor_friction, base.rheology
     );
     println!("| a | run-out | law | ratio | height | law | ratio | KE end | steps | s |");
     println!("|---|---|---|---|---|---|---|---|---|---|");

@@ -441,8 +441,9 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
 /// Turns contact between bodies on (`enabled` = 1, Coulomb `friction` >= 0) or off (0), before
 /// the first step. With contact every material is a body with its own grid velocity field
 /// (Bardenhagen et al. 2000): bodies meet without sticking, slide with friction `friction` and
-/// separate freely. Works with USL and material-point integration, without boundary points
-/// (else the first step returns `RKMPM_ERR_UNSUPPORTED`).
+/// separate freely. Works with USL and with material-point or VC integration (VC corrects each
+/// deformable body on its own field, over the surface found from its particles), without given
+/// boundary points (else the first step returns `RKMPM_ERR_UNSUPPORTED`).
 ///
 /// # Safety
 /// `sim` must be a live handle.
@@ -712,6 +713,42 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_drucker_prager(
             cohesion,
             dilatancy_angle,
         )
+    })
+}
+
+/// Gives the Drucker–Prager material `material` the μ(I) rate dependence of its friction
+/// (`enabled` = 1) or takes it away (0); may change between steps. The friction on
+/// `sqrt(J2)/p` rises from the static value by `Δμ I/(I_0 + I)` (`Δμ = friction_increase`,
+/// `I_0 = reference_inertial_number`), with the inertial number
+/// `I = γ̇ grain_diameter / sqrt(p/ρ)` of the plastic shear rate `γ̇`. With `enabled` = 1: `friction_increase` >= 0, `reference_inertial_number` > 0 and
+/// `grain_diameter` > 0 (m), all finite. Fails for an unknown material or one that is not
+/// Drucker–Prager.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_drucker_prager_rheology(
+    sim: *mut RkmpmSim,
+    material: u32,
+    enabled: u32,
+    friction_increase: f64,
+    reference_inertial_number: f64,
+    grain_diameter: f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_drucker_prager_rheology", || {
+        let s = sim_mut(sim)?;
+        let on = flag("enabled", enabled)?;
+        let rheology = if on {
+            Some(crate::material::InertialRheology::new(
+                friction_increase,
+                reference_inertial_number,
+                grain_diameter,
+            )?)
+        } else {
+            None
+        };
+        with_sim!(&mut s.sim, m => m.set_rheology(material, rheology))?;
+        Ok(())
     })
 }
 

@@ -87,7 +87,8 @@ impl<const D: usize> VcCorrection<D> {
 
     /// Computes `ξ_I` for every node touched by a particle: the particle sums over their
     /// stencils, the boundary sums over the stencils of the boundary points. Marks the nodes
-    /// active in `nodes`.
+    /// active in `nodes`. With `body = Some((materials, b))` (contact: one field per body) only
+    /// the particles of material `b` count, and `boundary` is that body's surface.
     ///
     /// The particle sums run in parallel by the colours of `bins` (the particles of `positions`
     /// binned for this step), the per-node solves in parallel: the same bits with any number of
@@ -103,6 +104,7 @@ impl<const D: usize> VcCorrection<D> {
         boundary: &BoundaryPoints<D>,
         boundary_stencils: &Stencils<D>,
         nodes: &mut GridNodes<D>,
+        body: Option<(&[u32], u32)>,
     ) {
         let m = self.m();
         let h = grid.cell_size;
@@ -111,7 +113,9 @@ impl<const D: usize> VcCorrection<D> {
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
                     for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
-                        visit(p as usize);
+                        if body.is_none_or(|(materials, b)| materials[p as usize] == b) {
+                            visit(p as usize);
+                        }
                     }
                 });
             }

@@ -66,6 +66,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
             &sim.boundary,
             &work.boundary_stencils,
             &mut work.nodes,
+            None,
         );
         vc
     });

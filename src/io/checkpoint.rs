@@ -162,9 +162,18 @@ fn write_material(w: &mut Writer, m: &Material) {
             write_elastic(w, e);
         }
         Material::DruckerPrager(dp) => {
-            w.u32(2);
+            // Tag 2: rate-independent (the yield surface's constants only, as format 1 always
+            // wrote them); tag 5: with the μ(I) rheology's three after them.
+            let c = dp.stored_constants();
+            let n = if dp.rheology.is_some() {
+                w.u32(5);
+                DruckerPrager::STORED
+            } else {
+                w.u32(2);
+                DruckerPrager::STORED_YIELD
+            };
             write_elastic(w, &dp.elastic);
-            w.f64s(&dp.stored_constants());
+            w.f64s(&c[..n]);
         }
         Material::JohnsonCook(jc) => {
             w.u32(3);
@@ -208,9 +217,21 @@ fn read_material(r: &mut Reader) -> Result<Material> {
     Ok(match tag {
         0 => Material::LinearElastic(LinearElastic(read_elastic(r)?)),
         1 => Material::NeoHookean(NeoHookean(read_elastic(r)?)),
-        2 => {
+        2 | 5 => {
             let e = read_elastic(r)?;
-            let c = read_n(DruckerPrager::STORED, r)?;
+            let mut c = read_n(DruckerPrager::STORED_YIELD, r)?;
+            c.extend(read_n(
+                if tag == 5 {
+                    DruckerPrager::STORED - DruckerPrager::STORED_YIELD
+                } else {
+                    0
+                },
+                r,
+            )?);
+            c.resize(DruckerPrager::STORED, 0.0);
+            if tag == 5 && !(c[8] > 0.0 && c[7] > 0.0 && c[6] >= 0.0) {
+                return Err(corrupt("a μ(I) rheology with invalid constants"));
+            }
             Material::DruckerPrager(DruckerPrager::from_stored(e, &c))
         }
         3 => {

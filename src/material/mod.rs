@@ -11,7 +11,7 @@ mod plastic;
 
 pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
 pub use johnson_cook::{ofhc_copper, JohnsonCook, JohnsonCookParameters, MieGruneisen};
-pub use plastic::{DruckerPrager, PlasticState};
+pub use plastic::{DruckerPrager, InertialRheology, PlasticState};
 
 use crate::error::Result;
 use nalgebra::Matrix3;
@@ -137,7 +137,7 @@ impl Material {
         dt: f64,
     ) -> (PlasticState, Matrix3<f64>) {
         match self {
-            Material::DruckerPrager(m) => m.update(state, df, j),
+            Material::DruckerPrager(m) => m.update(state, df, j, dt),
             Material::JohnsonCook(m) => m.update(state, df, j, dt),
             Material::LinearElastic(_) | Material::NeoHookean(_) | Material::Rigid(_) => {
                 unreachable!("elastic materials have no history")

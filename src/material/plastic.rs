@@ -55,6 +55,53 @@ pub struct DruckerPrager {
     alpha_friction: f64,
     alpha_dilatancy: f64,
     k_cohesion: f64,
+    /// The μ(I) rate dependence of the friction, if any.
+    pub rheology: Option<InertialRheology>,
+}
+
+/// The μ(I) rheology of dense granular flow (GDR MiDi 2004; Jop, Forterre & Pouliquen 2006)
+/// added to Drucker–Prager's friction: at an equivalent plastic shear rate `γ̇` and pressure `p`
+/// the inertial number is `I = γ̇ d / sqrt(p / ρ)` and the friction coefficient on
+/// `sqrt(J2) / p` rises from the static `μ_s = 3 α_φ` by `Δμ I / (I_0 + I)`. The rate is the
+/// step's plastic multiplier over `dt` (`sqrt(J2)` falls by `G γ̇ dt`, as in Dunatunga & Kamrin
+/// 2015), found with the stress in the same return (no lag).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InertialRheology {
+    /// `Δμ = μ_2 − μ_s`, the friction gained at large inertial numbers (≥ 0).
+    pub friction_increase: f64,
+    /// `I_0 > 0`, the inertial number at which half of `Δμ` is gained.
+    pub reference_inertial_number: f64,
+    /// Grain diameter `d > 0` (m).
+    pub grain_diameter: f64,
+}
+
+impl InertialRheology {
+    /// Checks the constants.
+    pub fn new(
+        friction_increase: f64,
+        reference_inertial_number: f64,
+        grain_diameter: f64,
+    ) -> Result<Self> {
+        check_finite("friction_increase", friction_increase)?;
+        if friction_increase < 0.0 {
+            return Err(Error::invalid(format!(
+                "friction_increase must be >= 0, got {friction_increase}"
+            )));
+        }
+        crate::error::check_positive("reference_inertial_number", reference_inertial_number)?;
+        crate::error::check_positive("grain_diameter", grain_diameter)?;
+        Ok(InertialRheology {
+            friction_increase,
+            reference_inertial_number,
+            grain_diameter,
+        })
+    }
+
+    /// The friction gained `Δμ I / (I_0 + I)` at inertial number `I`.
+    pub fn friction_gain(&self, inertial_number: f64) -> f64 {
+        self.friction_increase * inertial_number
+            / (self.reference_inertial_number + inertial_number)
+    }
 }
 
 fn mohr_coulomb_fit(angle: f64) -> (f64, f64) {
@@ -108,14 +155,30 @@ impl DruckerPrager {
             alpha_friction,
             alpha_dilatancy,
             k_cohesion: k * cohesion,
+            rheology: None,
         })
     }
 
-    /// Number of stored constants besides the elastic ones (for checkpoints).
-    pub(crate) const STORED: usize = 6;
+    /// The same soil with the μ(I) rate dependence of its friction.
+    pub fn with_rheology(self, rheology: Option<InertialRheology>) -> Self {
+        DruckerPrager { rheology, ..self }
+    }
+
+    /// Number of stored constants besides the elastic ones (for checkpoints): the six of the
+    /// yield surface, then `Δμ, I_0, d` of the rheology (`d = 0`: none).
+    pub(crate) const STORED: usize = 9;
+    /// The stored constants of the yield surface alone.
+    pub(crate) const STORED_YIELD: usize = 6;
 
     /// The constants as stored, derived ones included, so a restored model is bit-identical.
     pub(crate) fn stored_constants(&self) -> [f64; Self::STORED] {
+        let r = self.rheology.map_or([0.0; 3], |r| {
+            [
+                r.friction_increase,
+                r.reference_inertial_number,
+                r.grain_diameter,
+            ]
+        });
         [
             self.friction,
             self.cohesion,
@@ -123,6 +186,9 @@ impl DruckerPrager {
             self.alpha_friction,
             self.alpha_dilatancy,
             self.k_cohesion,
+            r[0],
+            r[1],
+            r[2],
         ]
     }
 
@@ -136,6 +202,11 @@ impl DruckerPrager {
             alpha_friction: c[3],
             alpha_dilatancy: c[4],
             k_cohesion: c[5],
+            rheology: (c[8] > 0.0).then_some(InertialRheology {
+                friction_increase: c[6],
+                reference_inertial_number: c[7],
+                grain_diameter: c[8],
+            }),
         }
     }
 
@@ -152,8 +223,15 @@ impl DruckerPrager {
         Vector3::repeat(l * eps.sum()) + 2.0 * m * eps
     }
 
-    /// Returns the trial principal strains `eps` to the yield surface: the new principal strains.
+    /// Returns the trial principal strains `eps` to the yield surface: the new principal strains
+    /// (rate-independent).
     pub fn return_map(&self, eps: &Vector3<f64>) -> Vector3<f64> {
+        self.return_map_over(eps, f64::INFINITY)
+    }
+
+    /// [`DruckerPrager::return_map`] over a step `dt`: with the μ(I) rheology the friction rises
+    /// with the plastic shear rate of this return.
+    pub fn return_map_over(&self, eps: &Vector3<f64>, dt: f64) -> Vector3<f64> {
         let (m, k) = (
             self.elastic.mu,
             self.elastic.lambda + 2.0 / 3.0 * self.elastic.mu,
@@ -167,7 +245,12 @@ impl DruckerPrager {
         let i1 = tau.sum();
         let s = tau - Vector3::repeat(i1 / 3.0);
         let sqrt_j2 = (0.5 * s.norm_squared()).sqrt();
-        let gamma = f / (9.0 * k * self.alpha_friction * self.alpha_dilatancy + m);
+        let mut gamma = f / (9.0 * k * self.alpha_friction * self.alpha_dilatancy + m);
+        if let Some(r) = self.rheology.filter(|_| dt.is_finite()) {
+            if sqrt_j2 - m * gamma >= 0.0 {
+                gamma = self.rate_dependent_multiplier(&r, sqrt_j2, i1, gamma, dt);
+            }
+        }
         let sqrt_j2_new = sqrt_j2 - m * gamma;
         let (i1_new, s_new) = if sqrt_j2_new >= 0.0 {
             let scale = if sqrt_j2 > 0.0 {
@@ -183,19 +266,63 @@ impl DruckerPrager {
         s_new / (2.0 * m) + Vector3::repeat(i1_new / (9.0 * k))
     }
 
+    /// The plastic multiplier `γ` of the return under the μ(I) rheology: the root of
+    /// `g(γ) = sqrt(J2)^tr − G γ − (μ_s + Δμ I/(I_0 + I)) p(γ) − k_c` with
+    /// `p(γ) = p^tr + 3 K α_ψ γ` (Kirchhoff pressure, compression positive) and
+    /// `I = (γ / dt) d / sqrt(p / ρ)`. `g(0) = f > 0` and `g(γ_s) ≤ 0` at the rate-independent
+    /// multiplier `γ_s`, since the friction only rises: bisection to round-off on `[0, γ_s]`.
+    fn rate_dependent_multiplier(
+        &self,
+        r: &InertialRheology,
+        sqrt_j2: f64,
+        i1: f64,
+        gamma_static: f64,
+        dt: f64,
+    ) -> f64 {
+        let (m, k) = (
+            self.elastic.mu,
+            self.elastic.lambda + 2.0 / 3.0 * self.elastic.mu,
+        );
+        let rho = self.elastic.density;
+        let g = |gamma: f64| {
+            let p = -(i1 - 9.0 * k * self.alpha_dilatancy * gamma) / 3.0;
+            let mu_s = 3.0 * self.alpha_friction;
+            let friction = if p > 0.0 {
+                mu_s + r.friction_gain(gamma / dt * r.grain_diameter / (p / rho).sqrt())
+            } else {
+                mu_s
+            };
+            sqrt_j2 - m * gamma - friction * p - self.k_cohesion
+        };
+        let (mut lo, mut hi) = (0.0, gamma_static);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if mid <= lo || mid >= hi {
+                break;
+            }
+            if g(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
+    }
+
     /// One constitutive update: the new state and Cauchy stress after the increment `df`, for a
-    /// total `det F = j`.
+    /// total `det F = j`, over the step `dt` (which only the μ(I) rheology uses).
     pub fn update(
         &self,
         state: &PlasticState,
         df: &Matrix3<f64>,
         j: f64,
+        dt: f64,
     ) -> (PlasticState, Matrix3<f64>) {
         let fe = df * state.elastic_deformation;
         let svd = fe.svd(true, true);
         let (u, vt) = (svd.u.expect("U"), svd.v_t.expect("Vᵀ"));
         let eps = svd.singular_values.map(|s| s.ln());
-        let eps_new = self.return_map(&eps);
+        let eps_new = self.return_map_over(&eps, dt);
         let tau = self.principal_stress(&eps_new);
         let fe_new = u * Matrix3::from_diagonal(&eps_new.map(f64::exp)) * vt;
         let plastic = (2.0f64 / 3.0).sqrt() * (eps - eps_new).norm();
@@ -238,6 +365,63 @@ mod tests {
             0.0,
         )
         .unwrap()
+    }
+
+    /// μ(I): a trial state sheared past the yield surface returns onto
+    /// `sqrt(J2) = (μ_s + Δμ I / (I_0 + I)) p`, with `I` from the shear rate of that very return
+    /// (`γ / dt`, `G γ` the fall of `sqrt(J2)`), to round-off; the friction lies between `μ_s`
+    /// and `μ_s + Δμ` and rises with the rate (the same trial over shorter steps, `I` from 0.01
+    /// to 10); with dilatancy the pressure the rate is taken at moves with the return, and the
+    /// same holds; a vanishing grain diameter gives the rate-independent return.
+    #[test]
+    fn mu_of_i_returns_onto_the_rate_dependent_surface() {
+        let rheology = InertialRheology::new(0.26, 0.28, 1.25e-3).unwrap();
+        let shear = 5e-3;
+        let eps = Vector3::new(-1e-3 + shear, -1e-3 - shear, -1e-3);
+        for dilatancy in [0.0, 10.0] {
+            let base = DruckerPrager::new(
+                ElasticConstants::new(2650.0, 8.4e5, 0.3).unwrap(),
+                20.0,
+                0.0,
+                dilatancy,
+            )
+            .unwrap();
+            let dp = base.with_rheology(Some(rheology));
+            let mu_s = 3.0 * dp.alpha_friction;
+            let invariants = |tau: &Vector3<f64>| {
+                let p = -tau.sum() / 3.0;
+                ((0.5 * (tau + Vector3::repeat(p)).norm_squared()).sqrt(), p)
+            };
+            let (trial, _) = invariants(&dp.principal_stress(&eps));
+            let mut last = mu_s;
+            for dt in [1e-3, 1e-4, 1e-5, 1e-6] {
+                let (q, p) = invariants(&dp.principal_stress(&dp.return_map_over(&eps, dt)));
+                let rate = (trial - q) / dp.elastic.mu / dt;
+                let i = rate * rheology.grain_diameter / (p / dp.elastic.density).sqrt();
+                let mu = q / p;
+                assert!(
+                    (mu - mu_s - rheology.friction_gain(i)).abs() < 1e-9,
+                    "ψ {dilatancy}, dt {dt}: μ {mu}, μ(I = {i}) {}",
+                    mu_s + rheology.friction_gain(i)
+                );
+                assert!(
+                    mu > last && mu < mu_s + 0.26,
+                    "ψ {dilatancy}, dt {dt}: μ {mu}"
+                );
+                last = mu;
+            }
+            assert!(
+                last > mu_s + 0.2,
+                "the fastest step gains most of Δμ: {last}"
+            );
+            let grainless =
+                base.with_rheology(Some(InertialRheology::new(0.26, 0.28, 1e-30).unwrap()));
+            let (a, b) = (grainless.return_map_over(&eps, 1e-4), base.return_map(&eps));
+            assert!((a - b).norm() < 1e-12 * b.norm(), "{a} against {b}");
+        }
+        assert!(InertialRheology::new(-0.1, 0.28, 1e-3).is_err());
+        assert!(InertialRheology::new(0.26, 0.0, 1e-3).is_err());
+        assert!(InertialRheology::new(0.26, 0.28, f64::NAN).is_err());
     }
 
     fn random_strain(rng: &mut UniformRng, size: f64) -> Vector3<f64> {
@@ -350,13 +534,13 @@ mod tests {
         let mut sigma = Matrix3::zeros();
         for _ in 0..20 {
             j *= 0.995;
-            (state, sigma) = dp.update(&state, &df, j);
+            (state, sigma) = dp.update(&state, &df, j, 1e-4);
         }
         assert!(state.plastic_strain > 0.0);
         let eig = (sigma * j).symmetric_eigenvalues();
         assert!(dp.yield_function(&eig) <= 1e-9 * dp.elastic.young);
         let r = nalgebra::Rotation3::from_euler_angles(0.4, -0.2, 0.9).into_inner();
-        let (rotated, sigma_r) = dp.update(&state, &r, j);
+        let (rotated, sigma_r) = dp.update(&state, &r, j, 1e-4);
         assert!((sigma_r - r * sigma * r.transpose()).norm() < 1e-9 * sigma.norm());
         assert_eq!(rotated.plastic_strain, state.plastic_strain);
     }

@@ -3,7 +3,7 @@
 
 use crate::boundary::{Boundary, Side};
 use crate::error::{Error, Result};
-use crate::material::Material;
+use crate::material::{DruckerPrager, ElasticConstants, InertialRheology, Material};
 use crate::shape::Shape;
 use crate::sim::{Integration, Sim, Transfer};
 use crate::Vector;
@@ -67,6 +67,8 @@ pub struct GranularColumn {
     pub shape: Shape,
     pub integration: Integration,
     pub transfer: Transfer,
+    /// The μ(I) rate dependence of the soil's friction (none by default).
+    pub rheology: Option<InertialRheology>,
 }
 
 impl Default for GranularColumn {
@@ -89,6 +91,7 @@ impl Default for GranularColumn {
             shape: Shape::BSpline2,
             integration: Integration::MaterialPoint,
             transfer: Transfer::Apic,
+            rheology: None,
         }
     }
 }
@@ -136,14 +139,13 @@ impl GranularColumn {
         sim.set_boundary(0, Side::Low, self.wall)?;
         sim.set_boundary(1, Side::Low, Boundary::Friction(self.floor_friction))?;
         sim.set_gravity([0.0, -self.gravity])?;
-        let mat = sim.add_material(Material::drucker_prager(
-            self.density,
-            self.young,
-            self.poisson,
+        let soil = DruckerPrager::new(
+            ElasticConstants::new(self.density, self.young, self.poisson)?,
             self.friction_degrees,
             self.cohesion,
             self.dilatancy_degrees,
-        )?);
+        )?;
+        let mat = sim.add_material(Material::DruckerPrager(soil.with_rheology(self.rheology)));
         let q = h / 2.0;
         let (nx, ny) = (2 * self.cells_across, (h0 / q).round() as usize);
         let x: Vec<Vector<2>> = (0..nx * ny)

@@ -233,4 +233,4 @@ mod taylor;
 pub use taylor::{TaylorBar, TaylorCase, TaylorResult};
 
 mod penetration;
-pub use penetration::{weldox_460e, Penetration, PenetrationResult};
+pub use penetration::{joined_to_the_clamp, weldox_460e, Penetration, PenetrationResult};

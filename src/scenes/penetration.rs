@@ -16,8 +16,11 @@
 use crate::boundary::{Boundary, Side};
 use crate::error::{Error, Result};
 use crate::material::{JohnsonCookParameters, Material};
-use crate::sim::{Sim, Transfer};
+use crate::particles::Particles;
+use crate::shape::Shape;
+use crate::sim::{Integration, Sim, Transfer};
 use crate::Vector;
+use std::collections::HashMap;
 
 /// The scene; lengths in m.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -33,6 +36,10 @@ pub struct Penetration {
     /// Simulated time (s).
     pub duration: f64,
     pub friction: f64,
+    /// Shape function and integration of both bodies (quadratic B-spline and material-point
+    /// integration by default; with VC each body is corrected over its own surface).
+    pub shape: Shape,
+    pub integration: Integration,
 }
 
 impl Default for Penetration {
@@ -46,6 +53,8 @@ impl Default for Penetration {
             cells_through_plate: 6,
             duration: 300e-6,
             friction: 0.0,
+            shape: Shape::BSpline2,
+            integration: Integration::MaterialPoint,
         }
     }
 }
@@ -80,9 +89,15 @@ pub struct PenetrationResult {
     /// How far the projectile's nose ended below the plate's original back face (m; negative:
     /// above it).
     pub nose_depth: f64,
-    /// Perforated: the nose ended more than a plate thickness below the original back face and
-    /// the projectile still moves onward (dishing alone does not reach that far).
+    /// Perforated: no plate material joined to the clamped edge through intact material
+    /// ([`joined_to_the_clamp`]) lies in the projectile's path below its nose, and the projectile
+    /// still moves onward. A plate that only dishes keeps a joined path under the nose.
     pub perforated: bool,
+    /// The mass of plate material cut off from the clamp over the mass of the plate under the
+    /// projectile (within its radius of the shot line, reference configuration): about 1 (plus a
+    /// shear band) for a plug, the plate's half width over the radius (its area ratio in 3D)
+    /// when the plate tore off at the clamp, 0 when nothing separated.
+    pub separated_mass: f64,
     /// Time at the end of the run (the plug may stop it before `duration`).
     pub time: f64,
     /// Plate particles that failed (`D = 1`) and the largest damage.
@@ -109,6 +124,8 @@ impl Penetration {
         cells[D - 1] = (height / h).ceil() as usize;
         let mut sim = Sim::<D>::new(Vector::<D>::zeros(), cells, h)?;
         sim.set_transfer(Transfer::Apic)?;
+        sim.set_shape(self.shape)?;
+        sim.set_integration(self.integration)?;
         sim.set_contact(Some(self.friction))?;
         for axis in 0..D - 1 {
             sim.set_boundary(axis, Side::Low, Boundary::Slip)?;
@@ -180,6 +197,9 @@ impl Penetration {
         )?;
         let back = 4.0 * self.plate_thickness;
         let ps = sim.particles();
+        let h = sim.grid().cell_size;
+        let joined = joined_to_the_clamp(ps, 0, h / 2.0, self.plate_half_width - h / 2.0);
+        let across = |x: &Vector<D>| x.rows(0, D - 1).norm();
         let (mut vsum, mut msum, mut lowest) = (0.0, 0.0, f64::INFINITY);
         let (mut failed, mut max_damage) = (0, 0.0f64);
         for p in 0..ps.len() {
@@ -193,11 +213,26 @@ impl Penetration {
                 failed += usize::from(d >= 1.0);
             }
         }
+        // Plate material joined to the clamp in the projectile's path, below its nose.
+        let blocked = (0..ps.len()).any(|p| {
+            joined[p]
+                && across(&ps.position[p]) < self.projectile_radius
+                && ps.position[p][D - 1] < lowest
+        });
+        let plate_mass = |keep: &dyn Fn(usize) -> bool| -> f64 {
+            (0..ps.len())
+                .filter(|&p| ps.material[p] == 0 && keep(p))
+                .map(|p| ps.mass[p])
+                .sum()
+        };
+        let separated_mass = plate_mass(&|p| !joined[p])
+            / plate_mass(&|p| across(&ps.reference_position[p]) < self.projectile_radius);
         let result = PenetrationResult {
             impact_speed: self.impact_speed,
             residual_speed: vsum / msum,
             nose_depth: back - lowest,
-            perforated: back - lowest > self.plate_thickness && vsum > 0.0,
+            perforated: !blocked && vsum > 0.0,
+            separated_mass,
             time: sim.time(),
             failed_particles: failed,
             max_damage,
@@ -210,5 +245,145 @@ impl Penetration {
 
     pub fn run<const D: usize>(&self) -> Result<PenetrationResult> {
         Ok(self.run_observed::<D>(0, |_| Ok(()))?.0)
+    }
+}
+
+/// Which particles of material `plate` are joined to its clamped edge (reference distance from
+/// the shot line at least `clamp`) through intact material: two intact (`D < 1`) plate particles
+/// are joined when their current distance is below 1.5 times `spacing` (the lattice spacing)
+/// times the larger stretch (largest singular value of `F`) of the two, so material that
+/// stretches without failing stays joined. Failed particles carry no tension and join nothing.
+pub fn joined_to_the_clamp<const D: usize>(
+    ps: &Particles<D>,
+    plate: u32,
+    spacing: f64,
+    clamp: f64,
+) -> Vec<bool> {
+    let intact: Vec<usize> = (0..ps.len())
+        .filter(|&p| ps.material[p] == plate && ps.plastic[p].damage < 1.0)
+        .collect();
+    let stretch = |p: usize| {
+        let f = crate::material::embed3(&ps.deformation_gradient[p]);
+        (f.transpose() * f).symmetric_eigenvalues().max().sqrt()
+    };
+    let reach: Vec<f64> = intact.iter().map(|&p| 1.5 * spacing * stretch(p)).collect();
+    let cell = reach.iter().copied().fold(0.0, f64::max);
+    let mut joined = vec![false; ps.len()];
+    if !(cell > 0.0 && cell.is_finite()) {
+        return joined;
+    }
+    let key = |x: &Vector<D>| -> [i64; D] { std::array::from_fn(|a| (x[a] / cell).floor() as i64) };
+    let mut buckets: HashMap<[i64; D], Vec<usize>> = HashMap::new();
+    for (k, &p) in intact.iter().enumerate() {
+        buckets.entry(key(&ps.position[p])).or_default().push(k);
+    }
+    let mut seen = vec![false; intact.len()];
+    let mut front: Vec<usize> = (0..intact.len())
+        .filter(|&k| ps.reference_position[intact[k]].rows(0, D - 1).norm() >= clamp)
+        .collect();
+    for &k in &front {
+        seen[k] = true;
+    }
+    while let Some(k) = front.pop() {
+        let x = ps.position[intact[k]];
+        let c = key(&x);
+        for offset in 0..3usize.pow(D as u32) {
+            let mut o = offset;
+            let neighbour: [i64; D] = std::array::from_fn(|a| {
+                let d = (o % 3) as i64 - 1;
+                o /= 3;
+                c[a] + d
+            });
+            for &j in buckets.get(&neighbour).map_or(&[][..], |v| v.as_slice()) {
+                if !seen[j] && (ps.position[intact[j]] - x).norm() < reach[k].max(reach[j]) {
+                    seen[j] = true;
+                    front.push(j);
+                }
+            }
+        }
+    }
+    for (k, &p) in intact.iter().enumerate() {
+        joined[p] = seen[k];
+    }
+    joined
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An intact plate is joined to its clamp everywhere; a column of failed particles at the
+    /// projectile's edge (a plane-strain plug's shear band) cuts off the plate inside it; and a
+    /// plate stretched 1.8 times across, with `F` to say so, stays joined where it is intact.
+    #[test]
+    fn a_failed_band_cuts_the_plug_off_the_clamp() {
+        let scene = Penetration {
+            cells_through_plate: 4,
+            ..Default::default()
+        };
+        let sim = scene.build::<2>().unwrap();
+        let q = sim.grid().cell_size / 2.0;
+        let clamp = scene.plate_half_width - q;
+        let r = scene.projectile_radius;
+        let intact = sim.particles().clone();
+        let plate = |ps: &Particles<2>| (0..ps.len()).filter(|&p| ps.material[p] == 0).count();
+        let count = |joined: &[bool], inside: bool| {
+            (0..intact.len())
+                .filter(|&p| {
+                    intact.material[p] == 0
+                        && joined[p]
+                        && (intact.reference_position[p][0] < r) == inside
+                })
+                .count()
+        };
+        let joined = joined_to_the_clamp(&intact, 0, q, clamp);
+        assert_eq!(count(&joined, true) + count(&joined, false), plate(&intact));
+        assert!(!joined
+            .iter()
+            .zip(&intact.material)
+            .any(|(&j, &m)| j && m == 1));
+        let mut cut = intact.clone();
+        for p in 0..cut.len() {
+            if cut.material[p] == 0 && (cut.reference_position[p][0] - r).abs() < q / 2.0 {
+                cut.plastic[p].damage = 1.0;
+            }
+        }
+        let band = (0..cut.len())
+            .filter(|&p| cut.plastic[p].damage >= 1.0)
+            .count();
+        assert_eq!(band, 8, "one column through the plate");
+        for (ps, what) in [
+            (cut.clone(), "cut"),
+            (stretched(&cut, 1.8), "stretched and cut"),
+        ] {
+            let joined = joined_to_the_clamp(&ps, 0, q, clamp);
+            assert_eq!(count(&joined, true), 0, "{what}: the plug is joined");
+            assert_eq!(
+                count(&joined, false),
+                plate(&ps) - band - count_inside(&ps, r),
+                "{what}: the plate outside the band is not joined"
+            );
+        }
+        let joined = joined_to_the_clamp(&stretched(&intact, 1.8), 0, q, clamp);
+        assert_eq!(count(&joined, true) + count(&joined, false), plate(&intact));
+    }
+
+    /// Plate particles inside the shot line's radius `r` (reference), not failed.
+    fn count_inside(ps: &Particles<2>, r: f64) -> usize {
+        (0..ps.len())
+            .filter(|&p| {
+                ps.material[p] == 0 && ps.plastic[p].damage < 1.0 && ps.reference_position[p][0] < r
+            })
+            .count()
+    }
+
+    /// The particles stretched `s` times across (positions and `F`).
+    fn stretched(ps: &Particles<2>, s: f64) -> Particles<2> {
+        let mut ps = ps.clone();
+        for p in 0..ps.len() {
+            ps.position[p][0] *= s;
+            ps.deformation_gradient[p][(0, 0)] *= s;
+        }
+        ps
     }
 }

@@ -39,7 +39,7 @@ pub use particle_to_grid::{particle_to_grid, Forces};
 
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
-use crate::integration::BoundaryPoints;
+use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
 use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
 use crate::sim::{Scheme, Sim, Transfer};
@@ -71,6 +71,8 @@ pub struct Workspace<const D: usize> {
     pub nodes: GridNodes<D>,
     /// One node field per body (material) under contact; empty otherwise.
     pub bodies: Vec<GridNodes<D>>,
+    /// One VC correction per body under contact with VC; empty otherwise.
+    pub body_vc: Vec<VcCorrection<D>>,
     /// Nodes touched by more than one body this step (contact).
     pub shared: Vec<usize>,
     pub body_acceleration: Vec<Vector<D>>,
@@ -163,14 +165,12 @@ impl<const D: usize> Sim<D> {
     fn check_options(&self) -> Result<()> {
         self.options.walls.check_fits(&self.grid)?;
         if self.options.contact.is_some()
-            && (self.vc.is_some()
-                || !self.boundary.is_empty()
-                || self.options.scheme == Scheme::Musl)
+            && (!self.boundary.is_empty() || self.options.scheme == Scheme::Musl)
         {
             return Err(Error::new(
                 ErrorKind::Unsupported,
-                "contact works with USL and material-point integration, without boundary points \
-                 (VC, MUSL and tractions are not supported with contact yet)",
+                "contact works with USL, without given boundary points (MUSL and tractions are \
+                 not supported with contact yet; VC finds each body's surface itself)",
             ));
         }
         if self.options.contact.is_none()
@@ -228,7 +228,7 @@ impl<const D: usize> Sim<D> {
             work.bodies
                 .resize_with(self.materials.len(), GridNodes::default);
             for b in work.bodies.iter_mut() {
-                b.ensure(grid, signed, true, signed)?;
+                b.ensure(grid, signed, true, signed || self.vc.is_some())?;
             }
         }
         // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
@@ -333,31 +333,46 @@ impl<const D: usize> Sim<D> {
         };
 
         // Boundary points, only when VC or tractions need them: the given ones, or for VC
-        // without any the surface of the particles as they are now.
+        // without any the surface of the particles as they are now (under contact each body's
+        // own, found with its VC correction below).
         let found = self.vc.is_some() && self.boundary.is_empty();
         work.times.forces_and_vc += lap(&mut clock);
         if found {
+            self.surface = BoundaryPoints::default();
+        }
+        if found && contact.is_none() {
             let (x, na) = BoundaryPoints::of_particles(
                 (&grid.origin, &grid.upper()),
                 &ps.position,
                 &ps.reference_volume,
                 &ps.deformation_gradient,
             );
-            self.surface = BoundaryPoints::default();
             self.surface.add(&x, &na, None)?;
         }
         work.times.surface += lap(&mut clock);
         let boundary = if found { &self.surface } else { &self.boundary };
         let with_boundary = self.vc.is_some() || boundary.has_tractions();
-        if with_boundary {
+        if with_boundary && contact.is_none() {
             work.boundary_stencils
                 .compute(self.shape.as_ref(), grid, &boundary.position);
         }
 
-        // VC corrections of the test-function gradients.
-        if let Some(vc) = self.vc.as_mut() {
+        // VC corrections of the test-function gradients (per body under contact, below).
+        if self.vc.is_none() || contact.is_none() {
+            // No per-body corrections left from a step that had them.
+            work.body_vc.clear();
+        }
+        if let Some(vc) = self.vc.as_ref() {
             work.volumes.clear();
             work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
+            if contact.is_some()
+                && (work.body_vc.len() != self.materials.len()
+                    || work.body_vc.iter().any(|c| c.order != vc.order))
+            {
+                work.body_vc = vec![vc.clone(); self.materials.len()];
+            }
+        }
+        if let Some(vc) = self.vc.as_mut().filter(|_| contact.is_none()) {
             vc.compute(
                 grid,
                 &work.bins,
@@ -367,6 +382,7 @@ impl<const D: usize> Sim<D> {
                 boundary,
                 &work.boundary_stencils,
                 &mut work.nodes,
+                None,
             );
         }
 
@@ -381,8 +397,37 @@ impl<const D: usize> Sim<D> {
             vc: self.vc.as_ref(),
         };
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
+        // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
+        let mut body_surfaces = BoundaryPoints::default();
         if let Some(contact) = contact {
             for (b, nodes) in work.bodies.iter_mut().enumerate() {
+                // VC of a deformable body: its surface and its correction on its own field.
+                let vc = match work.body_vc.get_mut(b).filter(|_| rigid[b].is_none()) {
+                    Some(vc) => {
+                        let surface = body_surface(grid, ps, b as u32)?;
+                        work.times.surface += lap(&mut clock);
+                        work.boundary_stencils.compute(
+                            self.shape.as_ref(),
+                            grid,
+                            &surface.position,
+                        );
+                        vc.compute(
+                            grid,
+                            &work.bins,
+                            &ps.position,
+                            &work.volumes,
+                            stored.expect("VC runs with stored stencils"),
+                            &surface,
+                            &work.boundary_stencils,
+                            nodes,
+                            Some((&ps.material, b as u32)),
+                        );
+                        body_surfaces.add(&surface.position, &surface.area_normal, None)?;
+                        work.times.forces_and_vc += lap(&mut clock);
+                        Some(&*vc)
+                    }
+                    None => None,
+                };
                 particle_to_grid(
                     grid,
                     ps,
@@ -391,7 +436,7 @@ impl<const D: usize> Sim<D> {
                     stored,
                     velocity,
                     affine_map,
-                    Some(forces),
+                    Some(Forces { vc, ..forces }),
                     Some(b as u32),
                     nodes,
                 );
@@ -629,6 +674,9 @@ impl<const D: usize> Sim<D> {
         }
         work.boundary_updates = boundary_updates;
         work.new_state = new;
+        if found && contact.is_some() {
+            self.surface = body_surfaces;
+        }
         work.times.checks += lap(&mut clock);
         Ok(())
     }
@@ -660,6 +708,29 @@ impl<const D: usize> Sim<D> {
             b.area_normal[k] = u.area_normal;
         }
     }
+}
+
+/// The surface of the particles of material `body` as they are now
+/// ([`BoundaryPoints::of_particles`]).
+fn body_surface<const D: usize>(
+    grid: &crate::grid::Grid<D>,
+    ps: &crate::particles::Particles<D>,
+    body: u32,
+) -> Result<BoundaryPoints<D>> {
+    let members: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == body).collect();
+    let gather = |v: &[_]| members.iter().map(|&p| v[p]).collect::<Vec<_>>();
+    let (x, na) = BoundaryPoints::of_particles(
+        (&grid.origin, &grid.upper()),
+        &members.iter().map(|&p| ps.position[p]).collect::<Vec<_>>(),
+        &gather(&ps.reference_volume),
+        &members
+            .iter()
+            .map(|&p| ps.deformation_gradient[p])
+            .collect::<Vec<_>>(),
+    );
+    let mut surface = BoundaryPoints::default();
+    surface.add(&x, &na, None)?;
+    Ok(surface)
 }
 
 /// Adds the traction forces `Σ_b Ψ_I(x_b) t_b |n a|_b` of the boundary points.
