@@ -150,8 +150,9 @@ impl<const D: usize> BoundaryPoints<D> {
     /// normals of each piece sum to zero exactly, a body that breaks apart gets its new faces,
     /// and no point drifts away from the material. A face of a voxel at the box's edge may lie
     /// beyond it (a body against a wall or symmetry plane): its point goes onto the edge. On an
-    /// undeformed lattice whose sites are voxel centres this is the surface of
-    /// [`BoundaryPoints::from_lattice`], split in `2^{D−1}` points per face.
+    /// undeformed lattice whose particle faces fall on even voxel boundaries this is the surface
+    /// of [`BoundaryPoints::from_lattice`]: the `2^{D−1}` voxel faces of a particle face merge
+    /// into one point (faces merge by twos along each tangential axis, from even voxels).
     pub fn of_particles(
         (origin, upper): (&Vector<D>, &Vector<D>),
         positions: &[Vector<D>],
@@ -223,20 +224,63 @@ impl<const D: usize> BoundaryPoints<D> {
             }
         };
         let body = VoxelSet::of(&ranges, voxels_of);
-        body.exposed_faces()
+        // Faces merged by twos per tangential axis: the `2^{D−1}` faces of one side of a
+        // block of voxels `2g, 2g + 1` across (per tangential axis) become one point at their
+        // centre with their area when all are exposed. On a lattice aligned with the voxels
+        // that is one point per particle face; the normals still sum to zero, and `x·(n a)`
+        // is unchanged (the faces of a group lie in one plane).
+        let mut faces: Vec<(Face<D>, [i64; D])> = body
+            .exposed_faces()
             .into_iter()
             .map(|(k, a, sign)| {
-                let centre = Vector::<D>::from_fn(|b, _| {
-                    let c = k[b] as f64 + 0.5 + if b == a { 0.5 * sign as f64 } else { 0.0 };
-                    (origin[b] + c * v).clamp(origin[b], upper[b])
-                });
-                let mut e = Vector::<D>::zeros();
-                e[a] = sign as f64 * v.powi(D as i32 - 1);
-                (centre, e)
+                let group = std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) });
+                ((group, a, sign), k)
             })
-            .unzip()
+            .collect();
+        // (group, voxel) is unique per face: the order is fixed whatever the threads.
+        faces.par_sort_unstable();
+        let full = 1usize << (D - 1);
+        let unit = v.powi(D as i32 - 1);
+        let point = |centre: [f64; D], a: usize, sign: i64, area: f64| {
+            let x =
+                Vector::<D>::from_fn(|b, _| (origin[b] + centre[b] * v).clamp(origin[b], upper[b]));
+            let mut e = Vector::<D>::zeros();
+            e[a] = sign as f64 * area;
+            (x, e)
+        };
+        let mut points = Vec::with_capacity(faces.len());
+        for run in faces.chunk_by(|x, y| x.0 == y.0) {
+            let ((group, a, sign), _) = run[0];
+            let normal_offset = |k: &[i64; D]| k[a] as f64 + 0.5 + 0.5 * sign as f64;
+            if run.len() == full {
+                // Centre of the block's side: 2g + 1 voxels along each tangential axis.
+                let centre = std::array::from_fn(|b| {
+                    if b == a {
+                        normal_offset(&run[0].1)
+                    } else {
+                        2.0 * group[b] as f64 + 1.0
+                    }
+                });
+                points.push(point(centre, a, sign, full as f64 * unit));
+            } else {
+                for (_, k) in run {
+                    let centre = std::array::from_fn(|b| {
+                        if b == a {
+                            normal_offset(k)
+                        } else {
+                            k[b] as f64 + 0.5
+                        }
+                    });
+                    points.push(point(centre, a, sign, unit));
+                }
+            }
+        }
+        points.into_iter().unzip()
     }
 }
+
+/// A voxel face: the voxel (or a group of voxels), the axis of its normal and the side (±1).
+type Face<const D: usize> = ([i64; D], usize, i64);
 
 /// The voxels of a body (integer indices): a dense map of the box the particles' voxel ranges
 /// span when it holds at most `DENSE_VOXELS_PER_PARTICLE` voxels per particle (linear time,
@@ -342,8 +386,8 @@ impl<const D: usize> VoxelSet<D> {
 
     /// The faces between the body and empty voxels: `(voxel, axis, ±1)`, in a fixed order
     /// (storage order for the map, sorted order for the list).
-    fn exposed_faces(&self) -> Vec<([i64; D], usize, i64)> {
-        let faces_of = |k: [i64; D], out: &mut Vec<([i64; D], usize, i64)>| {
+    fn exposed_faces(&self) -> Vec<Face<D>> {
+        let faces_of = |k: [i64; D], out: &mut Vec<Face<D>>| {
             for a in 0..D {
                 for sign in [-1i64, 1] {
                     let mut n = k;
@@ -354,7 +398,7 @@ impl<const D: usize> VoxelSet<D> {
                 }
             }
         };
-        let chunks: Vec<Vec<([i64; D], usize, i64)>> = match self {
+        let chunks: Vec<Vec<Face<D>>> = match self {
             VoxelSet::Sparse(list) => list
                 .par_chunks(1024)
                 .map(|chunk| {
@@ -459,7 +503,8 @@ mod tests {
     }
 
     /// On an undeformed lattice the surface found from the particles is the lattice surface of
-    /// [`BoundaryPoints::from_lattice`]: the same area, on the same faces, closed.
+    /// [`BoundaryPoints::from_lattice`]: the same points with the same area normals (the four
+    /// voxel faces of each particle face merged into one), closed.
     #[test]
     fn surface_of_an_undeformed_box_is_its_lattice_surface() {
         let (s, x) = (0.1, box_5_4_3());
@@ -471,8 +516,26 @@ mod tests {
             &vol,
             &f,
         );
-        let (lattice, _) = BoundaryPoints::from_lattice(&x, &vol);
-        assert_eq!(pts.len(), 4 * lattice.len());
+        let (lattice, lattice_normals) = BoundaryPoints::from_lattice(&x, &vol);
+        assert_eq!(pts.len(), lattice.len());
+        let sorted = |x: &[Vector<3>], n: &[Vector<3>]| {
+            let mut v: Vec<[f64; 6]> = x
+                .iter()
+                .zip(n)
+                .map(|(x, n)| [x[0], x[1], x[2], n[0], n[1], n[2]])
+                .collect();
+            v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            v
+        };
+        for (a, b) in sorted(&pts, &normals)
+            .iter()
+            .zip(sorted(&lattice, &lattice_normals))
+        {
+            assert!(
+                a.iter().zip(b).all(|(p, q)| (p - q).abs() < 1e-14),
+                "{a:?} {b:?}"
+            );
+        }
         let sum: Vector<3> = normals.iter().sum();
         assert!(sum.norm() < 1e-15);
         let area: f64 = normals.iter().map(|n| n.norm()).sum();
@@ -512,7 +575,8 @@ mod tests {
             .iter()
             .zip(&na)
             .filter(|(x, n)| (x[1] - 0.35).abs() < 1e-12 && n[1] > 0.0);
-        assert_eq!(top.count(), 8);
+        // Four particles across: one merged point per particle face.
+        assert_eq!(top.count(), 4);
         let (_, na) = surface(0.1 * s);
         let area: f64 = na.iter().map(|n| n.norm()).sum();
         assert!(area < 2.0 * (0.2 + 0.3) + 4.0 * s, "{area}");

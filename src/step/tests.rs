@@ -430,7 +430,7 @@ fn rk_shape_functions_slot_into_the_step() {
 
 /// With VC and no boundary points, every step finds the surface of the particles afresh: none
 /// are added to the given boundary points, the surface of an undeformed 4×4 block is its
-/// perimeter (voxels of half a spacing: two points per particle face), closed, and a rejected
+/// perimeter (voxels of half a spacing, merged: one point per particle face), closed, and a rejected
 /// step keeps the particles, so the next step finds the same surface.
 #[test]
 fn vc_finds_the_surface_of_the_particles_at_every_step() {
@@ -452,7 +452,8 @@ fn vc_finds_the_surface_of_the_particles_at_every_step() {
     sim.step(dt).unwrap();
     assert!(sim.boundary_points().is_empty());
     let s = sim.vc_surface();
-    assert_eq!(s.len(), 32);
+    // One point per particle face of the 4 × 4 block (its faces fall on even voxels).
+    assert_eq!(s.len(), 16);
     let sum: Vector<2> = s.area_normal.iter().sum();
     assert!(sum.norm() < 1e-16, "{sum}");
     let area: f64 = s.area_normal.iter().map(|n| n.norm()).sum();
@@ -759,12 +760,12 @@ fn vc_body_against_the_domain_edge_steps() {
     let b = sim.vc_surface();
     assert!(!b.is_empty());
     assert!(b.position.iter().all(|p| sim.grid().contains(p)));
-    // The faces on the three planes x, y, z = 0 are on the edge exactly (four voxel faces per
-    // particle face).
+    // The faces on the three planes x, y, z = 0 are on the edge exactly (the four voxel faces
+    // of a particle face merged into one point).
     let on_edge = b
         .position
         .iter()
         .filter(|p| p.iter().any(|&c| c == 0.0))
         .count();
-    assert_eq!(on_edge, 4 * 3 * n * n);
+    assert_eq!(on_edge, 3 * n * n);
 }
