@@ -226,21 +226,17 @@ impl<const D: usize> BoundaryPoints<D> {
         let body = VoxelSet::of(&ranges, voxels_of);
         // Faces merged by twos per tangential axis: the `2^{D−1}` faces of one side of a
         // block of voxels `2g, 2g + 1` across (per tangential axis) become one point at their
-        // centre with their area when all are exposed. On a lattice aligned with the voxels
-        // that is one point per particle face; the normals still sum to zero, and `x·(n a)`
-        // is unchanged (the faces of a group lie in one plane).
-        let mut faces: Vec<(Face<D>, [i64; D])> = body
-            .exposed_faces()
-            .into_iter()
-            .map(|(k, a, sign)| {
-                let group = std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) });
-                ((group, a, sign), k)
-            })
-            .collect();
-        // (group, voxel) is unique per face: the order is fixed whatever the threads.
-        faces.par_sort_unstable();
+        // centre with their area when all are exposed; the member with even tangential indices
+        // stands for the group. On a lattice aligned with the voxels that is one point per
+        // particle face; the normals still sum to zero, and `x·(n a)` is unchanged (the faces
+        // of a group lie in one plane). The points keep the faces' fixed order.
         let full = 1usize << (D - 1);
         let unit = v.powi(D as i32 - 1);
+        let exposed = |k: &[i64; D], a: usize, sign: i64| {
+            let mut n = *k;
+            n[a] += sign;
+            body.contains(k) && !body.contains(&n)
+        };
         let point = |centre: [f64; D], a: usize, sign: i64, area: f64| {
             let x =
                 Vector::<D>::from_fn(|b, _| (origin[b] + centre[b] * v).clamp(origin[b], upper[b]));
@@ -248,33 +244,40 @@ impl<const D: usize> BoundaryPoints<D> {
             e[a] = sign as f64 * area;
             (x, e)
         };
-        let mut points = Vec::with_capacity(faces.len());
-        for run in faces.chunk_by(|x, y| x.0 == y.0) {
-            let ((group, a, sign), _) = run[0];
-            let normal_offset = |k: &[i64; D]| k[a] as f64 + 0.5 + 0.5 * sign as f64;
-            if run.len() == full {
-                // Centre of the block's side: 2g + 1 voxels along each tangential axis.
-                let centre = std::array::from_fn(|b| {
-                    if b == a {
-                        normal_offset(&run[0].1)
-                    } else {
-                        2.0 * group[b] as f64 + 1.0
+        let points: Vec<(Vector<D>, Vector<D>)> = body
+            .exposed_faces()
+            .into_par_iter()
+            .filter_map(|(k, a, sign)| {
+                let normal = k[a] as f64 + 0.5 + 0.5 * sign as f64;
+                let first: [i64; D] =
+                    std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) * 2 });
+                let grouped = (0..full).all(|m| {
+                    // Member m: bit t of m offsets the t-th tangential axis.
+                    let mut member = first;
+                    for (t, b) in (0..D).filter(|&b| b != a).enumerate() {
+                        member[b] += ((m >> t) & 1) as i64;
                     }
+                    exposed(&member, a, sign)
                 });
-                points.push(point(centre, a, sign, full as f64 * unit));
-            } else {
-                for (_, k) in run {
+                if !grouped {
+                    let centre =
+                        std::array::from_fn(|b| if b == a { normal } else { k[b] as f64 + 0.5 });
+                    Some(point(centre, a, sign, unit))
+                } else if k == first {
+                    // Centre of the block's side: 2g + 1 voxels along each tangential axis.
                     let centre = std::array::from_fn(|b| {
                         if b == a {
-                            normal_offset(k)
+                            normal
                         } else {
-                            k[b] as f64 + 0.5
+                            first[b] as f64 + 1.0
                         }
                     });
-                    points.push(point(centre, a, sign, unit));
+                    Some(point(centre, a, sign, full as f64 * unit))
+                } else {
+                    None
                 }
-            }
-        }
+            })
+            .collect();
         points.into_iter().unzip()
     }
 }
