@@ -18,8 +18,8 @@ use crate::contact::Contact;
 use crate::error::{Error, ErrorKind, Result};
 use crate::integration::BoundaryPoints;
 use crate::material::{
-    Constitutive, DruckerPrager, ElasticConstants, JohnsonCook, JohnsonCookParameters,
-    LinearElastic, Material, MieGruneisen, NeoHookean, PlasticState, Rigid,
+    Constitutive, DruckerPrager, ElasticConstants, InertialRheology, JohnsonCook,
+    JohnsonCookParameters, LinearElastic, Material, MieGruneisen, NeoHookean, PlasticState, Rigid,
 };
 use crate::particles::Particles;
 use crate::shape::Shape;
@@ -219,18 +219,16 @@ fn read_material(r: &mut Reader) -> Result<Material> {
         1 => Material::NeoHookean(NeoHookean(read_elastic(r)?)),
         2 | 5 => {
             let e = read_elastic(r)?;
-            let mut c = read_n(DruckerPrager::STORED_YIELD, r)?;
-            c.extend(read_n(
-                if tag == 5 {
-                    DruckerPrager::STORED - DruckerPrager::STORED_YIELD
-                } else {
-                    0
-                },
-                r,
-            )?);
+            let stored = if tag == 5 {
+                DruckerPrager::STORED
+            } else {
+                DruckerPrager::STORED_YIELD
+            };
+            let mut c = read_n(stored, r)?;
             c.resize(DruckerPrager::STORED, 0.0);
-            if tag == 5 && !(c[8] > 0.0 && c[7] > 0.0 && c[6] >= 0.0) {
-                return Err(corrupt("a μ(I) rheology with invalid constants"));
+            if tag == 5 {
+                InertialRheology::new(c[6], c[7], c[8])
+                    .map_err(|e| corrupt(format!("a μ(I) rheology with {}", e.message)))?;
             }
             Material::DruckerPrager(DruckerPrager::from_stored(e, &c))
         }

@@ -341,13 +341,7 @@ impl<const D: usize> Sim<D> {
             self.surface = BoundaryPoints::default();
         }
         if found && contact.is_none() {
-            let (x, na) = BoundaryPoints::of_particles(
-                (&grid.origin, &grid.upper()),
-                &ps.position,
-                &ps.reference_volume,
-                &ps.deformation_gradient,
-            );
-            self.surface.add(&x, &na, None)?;
+            self.surface = found_surface(grid, ps, None)?;
         }
         work.times.surface += lap(&mut clock);
         let boundary = if found { &self.surface } else { &self.boundary };
@@ -404,7 +398,7 @@ impl<const D: usize> Sim<D> {
                 // VC of a deformable body: its surface and its correction on its own field.
                 let vc = match work.body_vc.get_mut(b).filter(|_| rigid[b].is_none()) {
                     Some(vc) => {
-                        let surface = body_surface(grid, ps, b as u32)?;
+                        let surface = found_surface(grid, ps, Some(b as u32))?;
                         work.times.surface += lap(&mut clock);
                         work.boundary_stencils.compute(
                             self.shape.as_ref(),
@@ -710,27 +704,39 @@ impl<const D: usize> Sim<D> {
     }
 }
 
-/// The surface of the particles of material `body` as they are now
-/// ([`BoundaryPoints::of_particles`]).
-fn body_surface<const D: usize>(
+/// The surface of the particles as they are now ([`BoundaryPoints::of_particles`]): of all of
+/// them, or under contact of those of material `body` only.
+fn found_surface<const D: usize>(
     grid: &crate::grid::Grid<D>,
     ps: &crate::particles::Particles<D>,
-    body: u32,
+    body: Option<u32>,
 ) -> Result<BoundaryPoints<D>> {
-    let members: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == body).collect();
-    let gather = |v: &[_]| members.iter().map(|&p| v[p]).collect::<Vec<_>>();
-    let (x, na) = BoundaryPoints::of_particles(
-        (&grid.origin, &grid.upper()),
-        &members.iter().map(|&p| ps.position[p]).collect::<Vec<_>>(),
-        &gather(&ps.reference_volume),
-        &members
-            .iter()
-            .map(|&p| ps.deformation_gradient[p])
-            .collect::<Vec<_>>(),
-    );
+    let box_ = (&grid.origin, &grid.upper());
+    let (x, na) = match body {
+        None => BoundaryPoints::of_particles(
+            box_,
+            &ps.position,
+            &ps.reference_volume,
+            &ps.deformation_gradient,
+        ),
+        Some(body) => {
+            let members: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == body).collect();
+            BoundaryPoints::of_particles(
+                box_,
+                &gather(&ps.position, &members),
+                &gather(&ps.reference_volume, &members),
+                &gather(&ps.deformation_gradient, &members),
+            )
+        }
+    };
     let mut surface = BoundaryPoints::default();
     surface.add(&x, &na, None)?;
     Ok(surface)
+}
+
+/// `values[p]` for each `p` of `members`.
+fn gather<T: Copy>(values: &[T], members: &[usize]) -> Vec<T> {
+    members.iter().map(|&p| values[p]).collect()
 }
 
 /// Adds the traction forces `Σ_b Ψ_I(x_b) t_b |n a|_b` of the boundary points.
