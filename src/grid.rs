@@ -424,6 +424,24 @@ impl<'a, const D: usize> NodeScatter<'a, D> {
         assert!(n < self.len);
         *self.touched.add(n) = true;
     }
+
+    /// Checks that the box of `width` nodes per axis from storage index `base` (with the
+    /// given strides) lies inside the node storage, so that [`NodeScatter::touch_unchecked`]
+    /// and the sums may address it.
+    #[inline(always)]
+    pub fn check_box<const D2: usize>(&self, base: usize, strides: &[usize; D2], width: usize) {
+        let last = base + strides.iter().map(|s| (width - 1) * s).sum::<usize>();
+        assert!(last < self.len);
+    }
+
+    /// Marks node `n` touched, without the bounds check of [`NodeScatter::touch`].
+    ///
+    /// # Safety
+    /// As [`NodeScatter::touch`], and `n` lies in a box [`NodeScatter::check_box`] accepted.
+    #[inline(always)]
+    pub unsafe fn touch_unchecked(&self, n: usize) {
+        *self.touched.add(n) = true;
+    }
 }
 
 /// Write access to disjoint parts of one slice from several threads (per-node storage of the

@@ -9,6 +9,7 @@ use crate::particles::{Field, Particles};
 use crate::shape::{Shape, ShapeFunction};
 use crate::step::Workspace;
 use crate::{Matrix, Vector};
+use rayon::prelude::*;
 
 /// How the weak form is integrated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -464,13 +465,15 @@ impl<const D: usize> Sim<D> {
                 "no particles: the stable time step is undefined",
             ));
         }
-        let ps = &self.particles;
+        let (ps, materials) = (&self.particles, &self.materials);
+        // In parallel: the maximum is exact, so any thread count gives the same value.
         let speed = (0..ps.len())
+            .into_par_iter()
             .map(|p| {
                 let j = crate::determinant(&ps.deformation_gradient[p]);
-                self.materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
+                materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
             })
-            .fold(0.0, f64::max);
+            .reduce(|| 0.0, f64::max);
         if !(speed > 0.0 && speed.is_finite()) {
             return Err(Error::state(format!(
                 "the largest signal speed max(c + |v|) over the particles is {speed:e}: no \

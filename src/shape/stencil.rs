@@ -376,41 +376,44 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     }
 }
 
-impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
-    #[inline(always)]
-    fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
-        self.visit(p, None, |s, node, _| f(s, node));
-    }
-
-    #[inline(always)]
-    fn for_each_with_offset(
-        &self,
-        _grid: &Grid<D>,
-        p: usize,
-        xp: Option<&Vector<D>>,
-        f: impl FnMut(usize, StencilNode<D>, Vector<D>),
-    ) {
-        self.visit(p, xp, f);
-    }
-
+impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// Scatter with the factors of each row: `Ψ = w_0 c`, `∇Ψ = (w_0' c, w_0 c_1, …)`, the
     /// momentum `m v + m C (x_I − x_p)` split into a row part and an axis-0 part, the force
     /// `−V σ ∇Ψ = w_0' (c σ_0) + w_0 (Σ_a c_a σ_a)` with the row sums taken once.
+    ///
+    /// `AFFINE`: `input.affine` is given; `FORCE`: `input.force` is given; `EXTRA`: the body
+    /// force or the mass gradient may be asked for (checked at run time). Nodes with a zero
+    /// value and gradient are skipped; for `W ≥ 3` (B-splines that are C¹) a zero value implies
+    /// a zero gradient, so the value alone decides.
+    ///
+    /// # Safety
+    /// As [`StencilView::scatter`].
     // Index loops over the axes: each index reads several per-axis tables at once.
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
-    unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
+    unsafe fn scatter_rows<const AFFINE: bool, const FORCE: bool, const EXTRA: bool>(
+        &self,
+        p: usize,
+        input: &ScatterInput<D>,
+        out: &NodeScatter<D>,
+    ) {
         let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
+        out.check_box(base, &self.strides, W);
         let first = &self.first[p];
         let xp = &input.position;
         let offset = |a: usize, k: usize| {
             self.origin[a] + (first[a] + k as i64) as f64 * self.cell_size - xp[a]
         };
         let m = input.mass;
+        let mc = input.affine.unwrap_or_else(Matrix::zeros);
+        let (vs, b) = input
+            .force
+            .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
         // Axis-0 part of the affine momentum, per node of a row.
-        let affine0: [Vector<D>; W] = match input.affine {
-            Some(mc) => std::array::from_fn(|k0| mc.column(0) * offset(0, k0)),
-            None => [Vector::zeros(); W],
+        let affine0: [Vector<D>; W] = if AFFINE {
+            std::array::from_fn(|k0| mc.column(0) * offset(0, k0))
+        } else {
+            [Vector::zeros(); W]
         };
         let mut k = [0usize; D];
         let mut row = base;
@@ -430,21 +433,18 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                 c_a
             });
             let mut momentum_row = input.momentum;
-            if let Some(mc) = input.affine {
+            if AFFINE {
                 for a in 1..D {
                     momentum_row += mc.column(a) * offset(a, k[a]);
                 }
             }
-            let (force0, force_rest) = match input.force {
-                Some((vs, _)) => {
-                    let mut rest = Vector::<D>::zeros();
-                    for a in 1..D {
-                        rest += c_a[a] * vs.column(a);
-                    }
-                    (c * vs.column(0), rest)
+            let (mut force0, mut force_rest) = (Vector::<D>::zeros(), Vector::<D>::zeros());
+            if FORCE {
+                for a in 1..D {
+                    force_rest += c_a[a] * vs.column(a);
                 }
-                None => (Vector::zeros(), Vector::zeros()),
-            };
+                force0 = c * vs.column(0);
+            }
             for k0 in 0..W {
                 let n = row + k0;
                 let value = w[0][k0] * c;
@@ -455,24 +455,26 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                         w[0][k0] * c_a[a]
                     }
                 });
-                if value == 0.0 && gradient == Vector::<D>::zeros() {
+                if value == 0.0 && (W >= 3 || gradient == Vector::<D>::zeros()) {
                     continue;
                 }
-                out.touch(n);
+                out.touch_unchecked(n);
                 scatter_add(out.momentum, n, value * (momentum_row + affine0[k0]));
-                if let Some((_, b)) = input.force {
+                if FORCE {
                     scatter_add(out.mass, n, m * value);
-                    if input.with_gradient {
-                        scatter_add(out.mass_gradient, n, m * gradient);
-                    }
                     scatter_add(out.force, n, dw[0][k0] * force0 + w[0][k0] * force_rest);
-                    if input.with_body_force {
-                        let field = if input.keep_body_force {
-                            out.body_force
-                        } else {
-                            out.force
-                        };
-                        scatter_add(field, n, (m * value) * b);
+                    if EXTRA {
+                        if input.with_gradient {
+                            scatter_add(out.mass_gradient, n, m * gradient);
+                        }
+                        if input.with_body_force {
+                            let field = if input.keep_body_force {
+                                out.body_force
+                            } else {
+                                out.force
+                            };
+                            scatter_add(field, n, (m * value) * b);
+                        }
                     }
                 }
             }
@@ -485,6 +487,40 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                 k[a] = 0;
                 row -= W * self.strides[a];
             }
+        }
+    }
+}
+
+impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
+    #[inline(always)]
+    fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
+        self.visit(p, None, |s, node, _| f(s, node));
+    }
+
+    #[inline(always)]
+    fn for_each_with_offset(
+        &self,
+        _grid: &Grid<D>,
+        p: usize,
+        xp: Option<&Vector<D>>,
+        f: impl FnMut(usize, StencilNode<D>, Vector<D>),
+    ) {
+        self.visit(p, xp, f);
+    }
+
+    /// Scatter with the factors of each row (see [`TensorStencils::scatter_rows`]), compiled
+    /// for the common cases: with or without APIC, with or without mass and force, and a
+    /// general version when there is a body force or a mass gradient to add.
+    #[inline(always)]
+    unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
+        let extra = input.with_body_force || input.with_gradient;
+        match (input.affine.is_some(), input.force.is_some(), extra) {
+            (true, true, false) => self.scatter_rows::<true, true, false>(p, input, out),
+            (false, true, false) => self.scatter_rows::<false, true, false>(p, input, out),
+            (true, false, _) => self.scatter_rows::<true, false, false>(p, input, out),
+            (false, false, _) => self.scatter_rows::<false, false, false>(p, input, out),
+            (true, true, true) => self.scatter_rows::<true, true, true>(p, input, out),
+            (false, true, true) => self.scatter_rows::<false, true, true>(p, input, out),
         }
         true
     }

@@ -165,7 +165,7 @@ impl<const D: usize> ParticleUpdate<D> {
     /// Whether the new state is admissible, given `j = det F`: the same answer as
     /// [`ParticleUpdate::check`], from one sum instead of a test per value (a sum that is finite
     /// has no NaN or infinite term; when the sum is not finite, the full check decides).
-    #[inline]
+    #[inline(always)]
     pub fn is_admissible(&self, grid: &Grid<D>, j: f64) -> bool {
         let sum = self.position.sum()
             + self.velocity.sum()
@@ -181,6 +181,8 @@ impl<const D: usize> ParticleUpdate<D> {
     }
 
     /// Whether the new state is admissible; if not, the kind of failure and what was wrong.
+    #[cold]
+    #[inline(never)]
     pub fn check(&self, grid: &Grid<D>) -> Result<(), (ErrorKind, String)> {
         let finite = self.position.iter().all(|c| c.is_finite())
             && self.velocity.iter().all(|c| c.is_finite())
