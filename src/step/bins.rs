@@ -1,7 +1,7 @@
 //! Particles binned by grid block, for a particle-to-grid map that runs in parallel without locks
 //! and gives the same bits with any number of threads.
 //!
-//! A block is `B_a` nodes along axis `a` (32 along axis 0, 4 along the others; more for wide
+//! A block is `B_a` nodes along axis `a` (128 along axis 0, 4 along the others; more for wide
 //! stencils). A particle belongs to the block of the first node of its stencil box
 //! (`ShapeFunction::stencil_origin`), so with `B_a ≥ W − 1` (`W` stencil nodes per axis) its
 //! stencil lies in its own block and the next one along each axis. Blocks take one of
@@ -24,8 +24,12 @@ const MIN_BLOCK: usize = 4;
 /// particles (lattices are added with axis 0 fastest): a block's particles then lie in long runs
 /// of the particle arrays. Measured on the 2D quadratic B-spline benchmark block (10^6
 /// particles, one thread), particle to grid took 149 ns per particle with blocks of 4 × 4 nodes,
-/// 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4.
-const LONG_BLOCK: usize = 32;
+/// 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4 (session 3); after the scatter was
+/// specialised (session 8) 41 ns with 32 × 4, 34 with 128 × 4 and 256 × 4, 27 with blocks as
+/// long as the grid (which leave too few blocks per colour to share among threads when a body
+/// is thin along axis 1). The whole step with 128 against 32, alternating, twice each: 2D 10^6
+/// 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
+const LONG_BLOCK: usize = 128;
 
 /// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
 #[derive(Debug, Clone)]

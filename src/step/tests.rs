@@ -664,10 +664,11 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
         },
     ] {
         let f: Box<dyn ShapeFunction<2>> = shape.build().unwrap();
-        let mut grid = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [70, 23], 0.1).unwrap();
+        // Wide enough for two blocks along axis 0 (128 nodes each), so all four colours occur.
+        let mut grid = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [300, 23], 0.1).unwrap();
         grid.set_ghost_layers(f.ghost_layers()).unwrap();
-        let x: Vec<Vector<2>> = (0..4000)
-            .map(|_| Vector::<2>::new(7.0 * rng.uniform(), 2.3 * rng.uniform()))
+        let x: Vec<Vector<2>> = (0..8000)
+            .map(|_| Vector::<2>::new(30.0 * rng.uniform(), 2.3 * rng.uniform()))
             .collect();
         let mut bins = Bins::<2>::default();
         bins.compute(f.as_ref(), &grid, &x);
