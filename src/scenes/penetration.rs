@@ -40,6 +40,9 @@ pub struct Penetration {
     /// integration by default; with VC each body is corrected over its own surface).
     pub shape: Shape,
     pub integration: Integration,
+    /// Free space below the plate, in plate thicknesses (room for the plate to dish and the
+    /// plug to fly).
+    pub space_below: f64,
 }
 
 impl Default for Penetration {
@@ -55,6 +58,7 @@ impl Default for Penetration {
             friction: 0.0,
             shape: Shape::BSpline2,
             integration: Integration::MaterialPoint,
+            space_below: 4.0,
         }
     }
 }
@@ -116,7 +120,10 @@ impl Penetration {
             return Err(Error::invalid("cells_through_plate must be >= 2"));
         }
         let h = self.plate_thickness / self.cells_through_plate as f64;
-        let below = 4.0 * self.plate_thickness;
+        if !(self.space_below > 0.0 && self.space_below.is_finite()) {
+            return Err(Error::invalid("space_below must be positive"));
+        }
+        let below = self.space_below * self.plate_thickness;
         let gap = h;
         let height = below + self.plate_thickness + gap + self.projectile_length + 2.0 * h;
         let across = (self.plate_half_width / h).round() as usize;
@@ -195,7 +202,7 @@ impl Penetration {
             &mut on_frame,
             &near_bottom,
         )?;
-        let back = 4.0 * self.plate_thickness;
+        let back = self.space_below * self.plate_thickness;
         let ps = sim.particles();
         let h = sim.grid().cell_size;
         let joined = joined_to_the_clamp(ps, 0, h / 2.0, self.plate_half_width - h / 2.0);
@@ -222,8 +229,8 @@ impl Penetration {
         let plate_mass = |keep: &dyn Fn(usize) -> bool| -> f64 {
             (0..ps.len())
                 .filter(|&p| ps.material[p] == 0 && keep(p))
-                .map(|p| ps.mass[p])
-                .sum()
+                // From +0 (an empty `sum` of f64 is −0).
+                .fold(0.0, |total, p| total + ps.mass[p])
         };
         let separated_mass = plate_mass(&|p| !joined[p])
             / plate_mass(&|p| across(&ps.reference_position[p]) < self.projectile_radius);
@@ -311,6 +318,36 @@ pub fn joined_to_the_clamp<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The plate's back face lies `space_below` plate thicknesses above the grid's bottom (the
+    /// lowest plate particles half a particle spacing above it), and a space that is not
+    /// positive is refused.
+    #[test]
+    fn the_plate_sits_space_below_thicknesses_up() {
+        for space_below in [4.0, 9.0] {
+            let scene = Penetration {
+                cells_through_plate: 4,
+                space_below,
+                ..Default::default()
+            };
+            let sim = scene.build::<2>().unwrap();
+            let ps = sim.particles();
+            let lowest = (0..ps.len())
+                .filter(|&p| ps.material[p] == 0)
+                .map(|p| ps.position[p][1])
+                .fold(f64::INFINITY, f64::min);
+            let q = scene.plate_thickness / 8.0;
+            let back = space_below * scene.plate_thickness;
+            assert!((lowest - (back + q / 2.0)).abs() < 1e-12, "{lowest} {back}");
+        }
+        for space_below in [0.0, -1.0, f64::NAN] {
+            let scene = Penetration {
+                space_below,
+                ..Default::default()
+            };
+            assert!(scene.build::<2>().is_err(), "{space_below}");
+        }
+    }
 
     /// An intact plate is joined to its clamp everywhere; a column of failed particles at the
     /// projectile's edge (a plane-strain plug's shear band) cuts off the plate inside it; and a
