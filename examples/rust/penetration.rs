@@ -153,18 +153,7 @@ fn refine(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
                     &out.join(format!("refine_{tag}_32.png")),
                 )?;
             }
-            writeln!(
-                md,
-                "| {name} | {cells} | {} | {:.2} | {:.1} | {:.1} | {} | {} | {} | {:.0} |",
-                if r.perforated { "yes" } else { "no" },
-                r.separated_mass,
-                r.nose_depth * 1e3,
-                r.residual_speed,
-                r.failed_particles,
-                r.particles,
-                r.steps,
-                r.seconds
-            )?;
+            writeln!(md, "| {name} | {cells} | {}", outcome_cells(&r))?;
         }
     }
     writeln!(md, "\n{PERFORATED}\n")?;
@@ -213,19 +202,7 @@ fn wide(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
                 &out.join(format!("wide_300_{us}.png")),
             )?;
         }
-        writeln!(
-            md,
-            "| {v:.0} | {:.0} | {} | {:.2} | {:.1} | {:.1} | {} | {} | {} | {:.0} |",
-            r.time * 1e6,
-            if r.perforated { "yes" } else { "no" },
-            r.separated_mass,
-            r.nose_depth * 1e3,
-            r.residual_speed,
-            r.failed_particles,
-            r.particles,
-            r.steps,
-            r.seconds
-        )?;
+        writeln!(md, "| {v:.0} | {:.0} | {}", r.time * 1e6, outcome_cells(&r))?;
     }
     writeln!(
         md,
@@ -235,6 +212,22 @@ fn wide(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     writeln!(md, "![300 m/s, 800 µs](wide_300_800.png)")?;
     std::fs::write(out.join("wide.md"), md)?;
     Ok(())
+}
+
+/// The columns the refinement and wide-plate tables share, from "perforated" to "run time",
+/// with the row's closing bar.
+fn outcome_cells(r: &PenetrationResult) -> String {
+    format!(
+        "{} | {:.2} | {:.1} | {:.1} | {} | {} | {} | {:.0} |",
+        if r.perforated { "yes" } else { "no" },
+        r.separated_mass,
+        r.nose_depth * 1e3,
+        r.residual_speed,
+        r.failed_particles,
+        r.particles,
+        r.steps,
+        r.seconds
+    )
 }
 
 /// How the tables read perforation and the separated plate.
