@@ -6,9 +6,13 @@
 //! A second target feeds `rkmpm_sim_load` damaged checkpoints whose checksum has been made right
 //! again, so that the decoder itself (not only the CRC) meets every kind of garbage.
 //!
-//! The test command runs 20 000 sequences and 5 000 checkpoints (about 30 s in release); a longer
-//! run: `PROPTEST_CASES=1000000 cargo test --release --test fuzz_c_api -- --nocapture` (the
-//! counts of calls, failures and steps are printed).
+//! A third target is the first with the μ(I) rheology call among the calls, from a
+//! Drucker–Prager seed body (its own strategy, so that the first target's stored seeds keep
+//! giving the cases they recorded).
+//!
+//! The test command runs 20 000 + 3 000 sequences and 5 000 checkpoints (about 30 s in
+//! release); a longer run: `PROPTEST_CASES=1000000 cargo test --release --test fuzz_c_api --
+//! --nocapture` (the counts of calls, failures and steps are printed).
 
 use proptest::prelude::*;
 use rkmpm::ffi::*;
@@ -42,6 +46,8 @@ enum Call {
     SetContact(u32, f64),
     AddNeoHookean(f64, f64, f64),
     AddDruckerPrager(f64, f64, f64, f64, f64, f64),
+    /// Material, enabled flag, Δμ, I0, grain diameter (only in the second target's calls).
+    SetRheology(u32, u32, f64, f64, f64),
     AddRigid(f64, [f64; 3]),
     AddParticles {
         material: u32,
@@ -96,6 +102,20 @@ fn call() -> impl Strategy<Value = Call> {
         2 => (0u32..13, any::<bool>()).prop_map(|(field, short)| Call::Read { field, short }),
         1 => Just(Call::WriteVtkNowhere),
     ]
+}
+
+/// The calls of [`call`] and, one time in ten, the μ(I) rheology of a Drucker–Prager material
+/// (a separate strategy, so that the first target's stored seeds still give their cases).
+fn call_with_rheology() -> impl Strategy<Value = Call> {
+    let rheology = (
+        prop_oneof![4 => 0u32..2, 1 => 0u32..5],
+        prop_oneof![6 => Just(1u32), 2 => Just(0u32), 1 => 2u32..4],
+        prop_oneof![3 => 0.0f64..0.5, 1 => real()],
+        prop_oneof![3 => 0.01f64..1.0, 1 => real()],
+        prop_oneof![3 => 1e-4f64..1e-2, 1 => real()],
+    )
+        .prop_map(|(m, on, dmu, i0, d)| Call::SetRheology(m, on, dmu, i0, d));
+    prop_oneof![9 => call(), 1 => rheology]
 }
 
 /// Everything a caller can observe of a simulation.
@@ -160,6 +180,9 @@ unsafe fn apply(sim: *mut RkmpmSim, dim: usize, c: &Call) -> RkmpmStatus {
         Call::AddDruckerPrager(a, b, c, d, e, f) => {
             let mut id = 0;
             rkmpm_sim_add_material_drucker_prager(sim, *a, *b, *c, *d, *e, *f, &mut id)
+        }
+        Call::SetRheology(m, on, dmu, i0, d) => {
+            rkmpm_sim_set_drucker_prager_rheology(sim, *m, *on, *dmu, *i0, *d)
         }
         Call::AddRigid(d, v) => {
             let mut id = 0;
@@ -229,6 +252,122 @@ static CALLS: AtomicUsize = AtomicUsize::new(0);
 static FAILED: AtomicUsize = AtomicUsize::new(0);
 static STEPS_WITH_PARTICLES: AtomicUsize = AtomicUsize::new(0);
 static CASES: AtomicUsize = AtomicUsize::new(0);
+/// Steps that moved particles after μ(I) was switched on in the same case.
+static STEPS_WITH_RHEOLOGY: AtomicUsize = AtomicUsize::new(0);
+
+/// The body a seeded case starts from (material 0 with eight particles).
+#[derive(Debug, Clone, Copy)]
+enum SeedBody {
+    NeoHookean,
+    DruckerPrager,
+}
+
+/// Runs one case: a new simulation in `dim` dimensions (with a seed body when `seeded`), then
+/// `calls`, checking after each call what the file's documentation promises.
+fn run_sequence(
+    dim: u32,
+    seeded: bool,
+    seed: SeedBody,
+    calls: &[Call],
+) -> Result<(), TestCaseError> {
+    unsafe {
+        let mut sim = null_mut();
+        let origin = [0.0; 3];
+        let cells = [6usize; 3];
+        prop_assert_eq!(
+            rkmpm_sim_new(dim, origin.as_ptr(), cells.as_ptr(), 1.0 / 6.0, &mut sim),
+            RKMPM_OK
+        );
+        CASES.fetch_add(1, Relaxed);
+        if seeded {
+            // Most cases start from a valid body, so that the calls after it meet particles.
+            let mut id = 0;
+            let status = match seed {
+                SeedBody::NeoHookean => {
+                    rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e4, 0.3, &mut id)
+                }
+                // Soil that yields under its own weight, so that steps reach the return mapping.
+                SeedBody::DruckerPrager => rkmpm_sim_add_material_drucker_prager(
+                    sim, 2000.0, 1e4, 0.3, 20.0, 0.0, 0.0, &mut id,
+                ),
+            };
+            prop_assert_eq!(status, RKMPM_OK);
+            let d = dim as usize;
+            let x: Vec<f64> = (0..8)
+                .flat_map(|k| (0..d).map(move |a| 0.4 + 0.1 * ((k >> a) & 1) as f64))
+                .collect();
+            prop_assert_eq!(
+                rkmpm_sim_add_particles(sim, 0, 8, x.as_ptr(), [1e-3; 8].as_ptr(), null()),
+                RKMPM_OK
+            );
+        }
+        let mut rheology_on = false;
+        for c in calls {
+            let before = snapshot(sim);
+            if let Some(trace) = std::env::var_os("RKMPM_FUZZ_TRACE") {
+                // The call about to run, for a run that hangs or aborts.
+                let _ = std::fs::write(
+                    trace,
+                    format!("dim {dim}, {} calls: {calls:?}\nnow: {c:?}\n", calls.len()),
+                );
+            }
+            let started = std::time::Instant::now();
+            let status = apply(sim, dim as usize, c);
+            if started.elapsed().as_secs_f64() > 0.5 {
+                eprintln!(
+                    "slow call ({:.1} s, dim {dim}, {:?}): {c:?}",
+                    started.elapsed().as_secs_f64(),
+                    status
+                );
+            }
+            CALLS.fetch_add(1, Relaxed);
+            if status != RKMPM_OK {
+                FAILED.fetch_add(1, Relaxed);
+            } else if matches!(c, Call::Step(_)) && before.count > 0 {
+                STEPS_WITH_PARTICLES.fetch_add(1, Relaxed);
+                if rheology_on {
+                    STEPS_WITH_RHEOLOGY.fetch_add(1, Relaxed);
+                }
+            } else if matches!(c, Call::SetRheology(_, 1, ..)) {
+                rheology_on = true;
+            }
+            prop_assert!(
+                status != RKMPM_ERR_PANIC,
+                "{:?} panicked: {}",
+                c,
+                last_error()
+            );
+            // An adaptive run that fails part-way keeps its good steps (documented), so only
+            // its first step must leave nothing behind.
+            let partial = matches!(c, Call::Advance(..)) && snapshot(sim).steps != before.steps;
+            if status != RKMPM_OK {
+                prop_assert!(!last_error().is_empty(), "{:?}: no message", c);
+            }
+            if status != RKMPM_OK && !partial {
+                let after = snapshot(sim);
+                prop_assert!(
+                    before == after,
+                    "{:?} failed with {:?} but changed the simulation",
+                    c,
+                    status
+                );
+            }
+        }
+        rkmpm_sim_free(sim);
+        if CASES.load(Relaxed).is_multiple_of(64) {
+            eprintln!(
+                "fuzz: {} cases, {} calls, {} failed with a status, {} steps moved particles \
+                 ({} with μ(I) on)",
+                CASES.load(Relaxed),
+                CALLS.load(Relaxed),
+                FAILED.load(Relaxed),
+                STEPS_WITH_PARTICLES.load(Relaxed),
+                STEPS_WITH_RHEOLOGY.load(Relaxed)
+            );
+        }
+    }
+    Ok(())
+}
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 20_000, max_shrink_iters: 2000, ..ProptestConfig::default() })]
@@ -239,55 +378,21 @@ proptest! {
         seeded in prop::bool::weighted(0.7),
         calls in prop::collection::vec(call(), 1..40),
     ) {
-        unsafe {
-            let mut sim = null_mut();
-            let origin = [0.0; 3];
-            let cells = [6usize; 3];
-            prop_assert_eq!(rkmpm_sim_new(dim, origin.as_ptr(), cells.as_ptr(), 1.0 / 6.0, &mut sim), RKMPM_OK);
-            CASES.fetch_add(1, Relaxed);
-            if seeded {
-                // Most cases start from a valid body, so that the calls after it meet particles.
-                let mut id = 0;
-                prop_assert_eq!(rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e4, 0.3, &mut id), RKMPM_OK);
-                let d = dim as usize;
-                let x: Vec<f64> = (0..8).flat_map(|k| (0..d).map(move |a| 0.4 + 0.1 * ((k >> a) & 1) as f64)).collect();
-                prop_assert_eq!(rkmpm_sim_add_particles(sim, 0, 8, x.as_ptr(), [1e-3; 8].as_ptr(), null()), RKMPM_OK);
-            }
-            for c in &calls {
-                let before = snapshot(sim);
-                if let Some(trace) = std::env::var_os("RKMPM_FUZZ_TRACE") {
-                    // The call about to run, for a run that hangs or aborts.
-                    let _ = std::fs::write(trace, format!("dim {dim}, {} calls: {calls:?}\nnow: {c:?}\n", calls.len()));
-                }
-                let started = std::time::Instant::now();
-                let status = apply(sim, dim as usize, c);
-                if started.elapsed().as_secs_f64() > 0.5 {
-                    eprintln!("slow call ({:.1} s, dim {dim}, {:?}): {c:?}", started.elapsed().as_secs_f64(), status);
-                }
-                CALLS.fetch_add(1, Relaxed);
-                if status != RKMPM_OK {
-                    FAILED.fetch_add(1, Relaxed);
-                } else if matches!(c, Call::Step(_)) && before.count > 0 {
-                    STEPS_WITH_PARTICLES.fetch_add(1, Relaxed);
-                }
-                prop_assert!(status != RKMPM_ERR_PANIC, "{:?} panicked: {}", c, last_error());
-                // An adaptive run that fails part-way keeps its good steps (documented), so only
-                // its first step must leave nothing behind.
-                let partial = matches!(c, Call::Advance(..)) && snapshot(sim).steps != before.steps;
-                if status != RKMPM_OK {
-                    prop_assert!(!last_error().is_empty(), "{:?}: no message", c);
-                }
-                if status != RKMPM_OK && !partial {
-                    let after = snapshot(sim);
-                    prop_assert!(before == after, "{:?} failed with {:?} but changed the simulation", c, status);
-                }
-            }
-            rkmpm_sim_free(sim);
-            if CASES.load(Relaxed).is_multiple_of(64) { eprintln!(
-                "fuzz: {} cases, {} calls, {} failed with a status, {} steps moved particles",
-                CASES.load(Relaxed), CALLS.load(Relaxed), FAILED.load(Relaxed), STEPS_WITH_PARTICLES.load(Relaxed)
-            ); }
-        }
+        run_sequence(dim, seeded, SeedBody::NeoHookean, &calls)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 3_000, max_shrink_iters: 2000, ..ProptestConfig::default() })]
+
+    /// The same with the μ(I) rheology call among the calls, from a Drucker–Prager seed body.
+    #[test]
+    fn random_call_sequences_with_the_rheology_never_break_the_api(
+        dim in 2u32..4,
+        seeded in prop::bool::weighted(0.8),
+        calls in prop::collection::vec(call_with_rheology(), 1..40),
+    ) {
+        run_sequence(dim, seeded, SeedBody::DruckerPrager, &calls)?;
     }
 }
 
