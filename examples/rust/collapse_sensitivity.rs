@@ -16,11 +16,19 @@
 //!   every step).
 //! * `--rheology d,Δμ,I0`: the μ(I) rate dependence of the friction (grain diameter in m, the
 //!   friction gained at large inertial numbers, the reference inertial number); none by default.
+//! * `--thick k1,k2,..`: also the run-out of the part of the deposit thicker than `k` particle
+//!   spacings (`thick_front`), per `k`.
+//!
+//! Ends with the run-out and height exponents fitted over the aspect ratios ≥ 1.5.
 
 use rkmpm::boundary::Boundary;
 use rkmpm::material::InertialRheology;
-use rkmpm::scenes::{GranularColumn, NGUYEN_BUI_FUKAGAWA};
+use rkmpm::scenes::{log_log_slope, thick_front, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 use rkmpm::{Integration, Shape};
+
+/// One aspect ratio's normalized results for the exponents: aspect ratio, run-out, height, and
+/// the run-out of the part thicker than each `--thick` value.
+type Row = (f64, f64, f64, Vec<f64>);
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -84,23 +92,65 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, floor μ {:.3}, method {method}, rheology {:?}\n",
         base.young, base.floor_friction, base.rheology
     );
-    println!("| a | run-out | law | ratio | height | law | ratio | KE end | steps | s |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let thick: Vec<f64> = value("--thick").map_or(Ok(Vec::new()), |v| {
+        v.split(',').map(str::parse).collect::<Result<_, _>>()
+    })?;
+    let thick_heads: String = thick
+        .iter()
+        .map(|k| format!(" run-out thicker than {k} q | ratio |"))
+        .collect();
+    println!(
+        "| a | run-out | law | ratio | height | law | ratio |{thick_heads} KE end | steps | s |"
+    );
+    println!(
+        "|---|---|---|---|---|---|---|{}---|---|---|",
+        "---|---|".repeat(thick.len())
+    );
+    let mut rows: Vec<Row> = Vec::new();
     for a in aspects {
-        let r = GranularColumn { aspect: a, ..base }.run()?;
+        let column = GranularColumn { aspect: a, ..base };
+        let (r, sim) = column.run_observed(0, |_| Ok(()))?;
         let law = NGUYEN_BUI_FUKAGAWA.runout(a);
         let h_law = NGUYEN_BUI_FUKAGAWA.final_height(a);
+        let ratio = |x: f64| law.map_or("–".into(), |l| format!("{:.3}", x / l));
+        let q = sim.grid().cell_size / 2.0;
+        let thick_runouts: Vec<f64> = thick
+            .iter()
+            .map(|k| {
+                (thick_front(&sim.particles().position, q, k * q) - column.width) / column.width
+            })
+            .collect();
+        let thick_cells: String = thick_runouts
+            .iter()
+            .map(|t| format!(" {t:.3} | {} |", ratio(*t)))
+            .collect();
         println!(
-            "| {a} | {:.3} | {} | {} | {:.3} | {h_law:.3} | {:.3} | {:.1e} | {} | {:.0} |",
+            "| {a} | {:.3} | {} | {} | {:.3} | {h_law:.3} | {:.3} |{thick_cells} {:.1e} | {} | {:.0} |",
             r.normalized_runout,
             law.map_or("–".into(), |l| format!("{l:.3}")),
-            law.map_or("–".into(), |l| format!("{:.3}", r.normalized_runout / l)),
+            ratio(r.normalized_runout),
             r.normalized_height,
             r.normalized_height / h_law,
             r.final_kinetic,
             r.steps,
             r.seconds
         );
+        rows.push((a, r.normalized_runout, r.normalized_height, thick_runouts));
+    }
+    let tall: Vec<_> = rows.iter().filter(|r| r.0 >= 1.5).collect();
+    if tall.len() >= 2 {
+        let fit = |f: &dyn Fn(&Row) -> f64| {
+            log_log_slope(&tall.iter().map(|r| (r.0, f(r))).collect::<Vec<_>>())
+        };
+        print!(
+            "\nExponents over a ≥ 1.5 (laws 0.73, 1/3): run-out {:.3}, height {:.3}",
+            fit(&|r| r.1),
+            fit(&|r| r.2)
+        );
+        for (i, k) in thick.iter().enumerate() {
+            print!(", run-out thicker than {k} q {:.3}", fit(&|r| r.3[i]));
+        }
+        println!();
     }
     Ok(())
 }

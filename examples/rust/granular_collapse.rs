@@ -15,7 +15,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::scenes::{CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+use rkmpm::scenes::{log_log_slope, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 use rkmpm::{Field, Integration, Shape};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -150,7 +150,7 @@ fn exponents_of(rows: &[CollapseResult]) -> (f64, f64) {
         .map(|r| (r.aspect, r.normalized_runout))
         .collect();
     let height: Vec<(f64, f64)> = tall.map(|r| (r.aspect, r.normalized_height)).collect();
-    (slope(&run), slope(&height))
+    (log_log_slope(&run), log_log_slope(&height))
 }
 
 /// The log-log axes of run-out and height against the aspect ratio.
@@ -234,18 +234,6 @@ fn plot_methods(
         .draw()?;
     root.present()?;
     Ok(())
-}
-
-/// Least-squares slope of ln y against ln x.
-fn slope(points: &[(f64, f64)]) -> f64 {
-    let n = points.len() as f64;
-    let (mx, my) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
-        (a + x.ln() / n, b + y.ln() / n)
-    });
-    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
-        (a + (x.ln() - mx) * (y.ln() - my), b + (x.ln() - mx).powi(2))
-    });
-    sxy / sxx
 }
 
 fn write_tables(

@@ -223,7 +223,78 @@ pub fn deposit_front(positions: &[Vector<2>], q: f64) -> f64 {
     front + q / 2.0
 }
 
+/// The front of the part of the deposit thicker than `thickness`: walking out from the wall at
+/// `x = 0` in columns `q` wide, the start of the first column whose highest particle (plus
+/// `q/2`) lies below `thickness`. With `thickness` of a few particle spacings it leaves out the
+/// thin layer a spreading heap leaves ahead of itself, which [`deposit_front`] counts.
+pub fn thick_front(positions: &[Vector<2>], q: f64, thickness: f64) -> f64 {
+    let columns = positions
+        .iter()
+        .map(|p| (p[0] / q).floor().max(0.0) as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut top = vec![0.0f64; columns];
+    for p in positions {
+        let c = (p[0] / q).floor().max(0.0) as usize;
+        top[c] = top[c].max(p[1] + q / 2.0);
+    }
+    let first_thin = top.iter().position(|&t| t < thickness).unwrap_or(columns);
+    first_thin as f64 * q
+}
+
+/// The least-squares slope of `ln y` against `ln x`: the exponent of a power law through the
+/// points `(x, y)`.
+pub fn log_log_slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    let (mx, my) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + x.ln() / n, b + y.ln() / n)
+    });
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + (x.ln() - mx) * (y.ln() - my), b + (x.ln() - mx).powi(2))
+    });
+    sxy / sxx
+}
+
 /// `σ_zz` of a plane-strain particle from its in-plane stress and pressure `−tr(σ)/3`.
 fn out_of_plane_stress(s: &crate::Matrix<2>, pressure: f64) -> f64 {
     -3.0 * pressure - s.trace()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ramp of particles on a lattice of spacing `q`, `N − c` particles high in column `c`:
+    /// the part thicker than `k q` ends where the ramp drops below `k` particles, and the whole
+    /// deposit (no gaps) ends at the last column.
+    #[test]
+    fn thick_front_of_a_ramp() {
+        let (q, n) = (0.01, 20usize);
+        let x: Vec<Vector<2>> = (0..n)
+            .flat_map(|c| {
+                (0..n - c)
+                    .map(move |r| Vector::<2>::new((c as f64 + 0.5) * q, (r as f64 + 0.5) * q))
+            })
+            .collect();
+        for k in [1usize, 2, 5, 20] {
+            // A threshold between particle layers, away from the round-off of the tops.
+            let front = thick_front(&x, q, (k as f64 - 0.25) * q);
+            assert!(
+                (front - (n - k + 1) as f64 * q).abs() < 1e-12,
+                "k {k}: {front}"
+            );
+        }
+        assert!((deposit_front(&x, q) - n as f64 * q).abs() < 1e-12);
+        assert_eq!(thick_front(&[], q, q), 0.0);
+    }
+
+    /// The slope of a power law's points is its exponent.
+    #[test]
+    fn log_log_slope_of_a_power_law() {
+        let points: Vec<(f64, f64)> = [1.5, 2.0, 3.0, 4.0]
+            .iter()
+            .map(|&a: &f64| (a, 3.8 * a.powf(0.73)))
+            .collect();
+        assert!((log_log_slope(&points) - 0.73).abs() < 1e-12);
+    }
 }

@@ -227,7 +227,9 @@ pub fn run_with_frames<const D: usize>(
 }
 
 mod collapse;
-pub use collapse::{deposit_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+pub use collapse::{
+    deposit_front, log_log_slope, thick_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA,
+};
 
 mod taylor;
 pub use taylor::{TaylorBar, TaylorCase, TaylorResult};
