@@ -11,7 +11,7 @@
 //! through the plate with the quadratic B-spline and RK1 + VC1 and writes
 //! `docs/validation/penetration/refinement.md` (about 20 minutes). `-- --wide` runs the
 //! plane-strain scene with a plate clamped 150 mm from the axis and room below it to dish, and
-//! writes `docs/validation/penetration/wide.md` (about 4 minutes).
+//! writes `docs/validation/penetration/wide.md` (about 3 minutes).
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -173,7 +173,7 @@ fn wide(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
 
 ",
     );
-    writeln!(md, "Regenerate: `cargo run --release --example penetration -- --wide` (about 4 minutes). The plane-strain scene of [README.md](README.md) (8 cells through the plate), with the plate clamped 150 mm from the axis instead of 60 mm and 240 mm (20 plate thicknesses) of room below it instead of 48 mm.
+    writeln!(md, "Regenerate: `cargo run --release --example penetration -- --wide` (about 3 minutes). The plane-strain scene of [README.md](README.md) (8 cells through the plate), with the plate clamped 150 mm from the axis instead of 60 mm and 240 mm (20 plate thicknesses) of room below it instead of 48 mm.
 ")?;
     writeln!(md, "| impact speed (m/s) | end time (µs) | perforated | plate cut off from the clamp / plate under the projectile (mass) | nose below back face (mm) | residual speed (m/s) | failed plate particles | particles | steps | run time (s) |")?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
