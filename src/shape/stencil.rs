@@ -508,7 +508,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
         self.visit(p, xp, f);
     }
 
-    /// Scatter with the factors of each row (see [`TensorStencils::scatter_rows`]), compiled
+    /// Scatter with the factors of each row (`TensorStencils::scatter_rows`, private), compiled
     /// for the common cases: with or without APIC, with or without mass and force, and a
     /// general version when there is a body force or a mass gradient to add.
     #[inline(always)]
