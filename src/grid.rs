@@ -429,7 +429,7 @@ impl<'a, const D: usize> NodeScatter<'a, D> {
     /// given strides) lies inside the node storage, so that [`NodeScatter::touch_unchecked`]
     /// and the sums may address it.
     #[inline(always)]
-    pub fn check_box<const D2: usize>(&self, base: usize, strides: &[usize; D2], width: usize) {
+    pub fn check_box(&self, base: usize, strides: &[usize; D], width: usize) {
         let last = base + strides.iter().map(|s| (width - 1) * s).sum::<usize>();
         assert!(last < self.len);
     }
