@@ -1,5 +1,7 @@
 """Runs the throughput matrix (rkmpm methods x dims x particle counts x threads, and the peers on the
 matching quadratic B-spline APIC configuration), writes a CSV and prints Markdown tables.
+The method `bspline2-mls` is the quadratic B-spline with the MLS transfer (`--transfer mls`), the
+peers' own transfer; it runs material-point only, with exactly S(N) steps like the peers.
 Called by scripts/bench.sh, which makes the venv and builds the example; see that script.
 
 Every rkmpm run: 1 warm-up step, then S(N) = clamp(1e7 / N, 10, 100) timed steps, stopping early
@@ -24,7 +26,7 @@ sys.path.insert(0, HERE)
 from block import HEADER, per_direction  # noqa: E402
 
 FIELDS = HEADER.split(",") + ["wall_seconds", "max_rss_mb", "status", "note"]
-METHODS = ["linear", "bspline2", "bspline3", "rk1", "rk2"]
+METHODS = ["linear", "bspline2", "bspline2-mls", "bspline3", "rk1", "rk2"]
 
 
 def steps_for(n, quick):
@@ -96,8 +98,9 @@ def main():
     for dim, n in counts:
         steps = steps_for(n, a.quick)
         for method in methods:
-            for vc in (False, True):
-                matching = method == "bspline2" and not vc
+            mls = method == "bspline2-mls"
+            for vc in (False, True) if not mls else (False,):
+                matching = method in ("bspline2", "bspline2-mls") and not vc
                 for t in threads:
                     fallback = ["rkmpm", str(dim), method, "vc" if vc else "mp", "", str(per_direction(n, dim) ** dim), "", str(t)]
                     fallback += [""] * (len(HEADER.split(",")) - len(fallback))
@@ -112,8 +115,10 @@ def main():
                             record(None, 0, 0, "skipped",
                                    f"predicted {step_s:.1f} s/step, {mem_gb:.1f} GB", fallback)
                             continue
-                    cmd = [a.example, "--dim", str(dim), "--method", method, "--particles", str(n),
-                           "--steps", str(steps), "--warmup", "1"]
+                    cmd = [a.example, "--dim", str(dim), "--method", "bspline2" if mls else method,
+                           "--particles", str(n), "--steps", str(steps), "--warmup", "1"]
+                    if mls:
+                        cmd += ["--transfer", "mls"]
                     if vc:
                         cmd.append("--vc")
                     if not matching:
@@ -123,6 +128,8 @@ def main():
                         record(None, wall, rss, "failed", tail, fallback)
                         continue
                     f = line.split(",")
+                    f[2] = method  # bspline2-mls runs as bspline2 with --transfer mls
+                    line = ",".join(f)
                     last[(method, vc, dim)] = (int(f[5]), float(f[11]), rss)
                     record(line, wall, rss, "ok", tail, fallback)
         if a.no_peers:
@@ -176,6 +183,8 @@ def report(rows):
                         r = get("rkmpm", dim, method, vc, n, t)
                         parts.append(f"{float(r['particle_steps_per_s']) / 1e6:.3g}" if r else "–")
                     cells.append(" / ".join(parts))
+                if all(c == "– / –" for c in cells):
+                    continue
                 label = f"{method}{' + VC' if vc == 'vc' else ''}{' (PIC)' if method == 'rk2' else ''}"
                 out.append(f"| {label} | " + " | ".join(cells) + " |")
         out.append("")
@@ -183,8 +192,9 @@ def report(rows):
                "rkmpm / peer (same run)**\n")
     out.append("| dim | N | steps | rkmpm 1T | rkmpm 2T | Warp 1T | Taichi 1T | Taichi 2T | "
                "rkmpm 1T / Warp | rkmpm 1T / Taichi 1T | rkmpm 2T / Taichi 2T | rkmpm 2T / Warp | "
-               "KE rkmpm vs Warp |")
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+               "KE rkmpm vs Warp | rkmpm MLS 1T / 2T | MLS 1T / Warp | MLS 2T / Warp | "
+               "KE MLS vs Warp |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for dim, n in configs:
         r1 = get("rkmpm", dim, "bspline2", "mp", n, 1)
         r2 = get("rkmpm", dim, "bspline2", "mp", n, 2)
@@ -203,12 +213,17 @@ def report(rows):
         def ratio(a, b):
             return f"{v(a) / v(b):.2f}" if a and b else "–"
 
-        ke = "–"
-        if r1 and w:
-            ke = f"{abs(float(r1['kinetic_energy']) / float(w['kinetic_energy']) - 1):.1e}"
+        def ke(r):
+            if r and w:
+                return f"{abs(float(r['kinetic_energy']) / float(w['kinetic_energy']) - 1):.1e}"
+            return "–"
+
+        l1 = get("rkmpm", dim, "bspline2-mls", "mp", n, 1)
+        l2 = get("rkmpm", dim, "bspline2-mls", "mp", n, 2)
         out.append(f"| {dim}D | {int(n):,} | {(r1 or w or t1)['steps']} | {m(r1)} | {m(r2)} | {m(w)} | "
                    f"{m(t1)} | {m(t2)} | {ratio(r1, w)} | {ratio(r1, t1)} | {ratio(r2, t2)} | "
-                   f"{ratio(r2, w)} | {ke} |")
+                   f"{ratio(r2, w)} | {ke(r1)} | {m(l1)} / {m(l2)} | {ratio(l1, w)} | "
+                   f"{ratio(l2, w)} | {ke(l1)} |")
     skipped = [r for r in rows if r["status"] != "ok"]
     if skipped:
         out.append("\nNot measured:\n")

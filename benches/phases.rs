@@ -122,6 +122,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         gravity: Vector::zeros(),
         body: None,
         vc: None,
+        mls: None,
     };
     g.bench_function(BenchmarkId::new("p2g", "bspline2 apic"), |b| {
         b.iter(|| p2g(&grid, &ps, &bins, &factors, forces, &mut nodes))
@@ -134,6 +135,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         flip: 0.0,
         apic: true,
         inverse_inertia: Some(4.0 / (grid.cell_size * grid.cell_size)),
+        mls: false,
     };
     let (mut new, mut admissible) = (NewState::<D>::default(), Vec::new());
     g.bench_function(BenchmarkId::new("g2p", "bspline2 apic"), |b| {
@@ -146,7 +148,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 &[None],
                 plan,
                 dt,
-                None::<&NoFinish<D>>,
+                None::<&NoFinish>,
                 &mut new,
                 &mut admissible,
             )

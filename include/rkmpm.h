@@ -251,6 +251,13 @@ typedef uint32_t RkmpmField;
 #define RKMPM_TRANSFER_APIC 1
 
 /**
+ * Moving-least-squares MPM (Hu et al. 2018): APIC with the MLS gradient in the force and the
+ * velocity gradient; quadratic or cubic B-spline only, without VC (else the first step fails
+ * with `RKMPM_ERR_UNSUPPORTED`).
+ */
+#define RKMPM_TRANSFER_MLS 2
+
+/**
  * Update stress last (the default).
  */
 #define RKMPM_SCHEME_USL 0
@@ -449,8 +456,9 @@ enum RkmpmStatus rkmpm_sim_set_integration(struct RkmpmSim *sim,
 
 /**
  * Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] is read only
- * for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2 is refused by the first
- * step (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
+ * for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2, and MLS with a shape
+ * function other than the quadratic or cubic B-spline or with VC, are refused by the first step
+ * (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
  *
  * # Safety
  * `sim` must be a live handle.

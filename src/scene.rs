@@ -12,7 +12,7 @@
 //! cell_size = 0.025
 //! [options]                    # all optional; these are the defaults
 //! shape = "bspline2"           # linear | bspline2 | bspline3 | rk (with rk_order, rk_support)
-//! transfer = "apic"            # apic | pic_flip (with flip)
+//! transfer = "apic"            # apic | pic_flip (with flip) | mls
 //! [[materials]]
 //! name = "rubber"
 //! model = "neo_hookean"        # linear_elastic | neo_hookean | drucker_prager | johnson_cook | rigid
@@ -84,6 +84,7 @@ pub enum TransferName {
     #[default]
     Apic,
     PicFlip,
+    Mls,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
@@ -422,6 +423,7 @@ impl Scene {
         sim.set_transfer(match o.transfer {
             TransferName::Apic => Transfer::Apic,
             TransferName::PicFlip => Transfer::PicFlip { flip: o.flip },
+            TransferName::Mls => Transfer::Mls,
         })
         .map_err(context("options"))?;
         sim.set_scheme(match o.scheme {

@@ -28,6 +28,20 @@ pub enum Transfer {
     PicFlip { flip: f64 },
     /// Affine particle-in-cell (Jiang et al. 2015).
     Apic,
+    /// Moving-least-squares MPM (Hu et al. 2018): APIC whose internal force and velocity
+    /// gradient take the MLS gradient `M⁻¹ Ψ_I (x_I − x_p)` in place of `∇Ψ_I`, so the force
+    /// rides on the affine momentum (one scatter of mass and momentum per node, no force sum)
+    /// and the velocity gradient is the affine matrix `C_p`. Quadratic and cubic B-splines only
+    /// (`M = h²/4`, `h²/3`), without VC (else the first step fails with `Unsupported`); the
+    /// transfer of Taichi's and Warp's MPM examples.
+    Mls,
+}
+
+impl Transfer {
+    /// Whether particles keep an affine matrix `C_p` (APIC and MLS).
+    pub fn is_affine(&self) -> bool {
+        matches!(self, Transfer::Apic | Transfer::Mls)
+    }
 }
 
 /// Where the stress update and the second velocity map sit.
@@ -219,13 +233,13 @@ impl<const D: usize> Sim<D> {
             }
         }
         self.options.transfer = transfer;
-        // APIC matrices exist only under APIC.
-        match transfer {
-            Transfer::Apic => self
-                .particles
+        // Affine matrices exist only under APIC and MLS.
+        if transfer.is_affine() {
+            self.particles
                 .affine
-                .resize(self.particles.len(), Matrix::<D>::zeros()),
-            Transfer::PicFlip { .. } => self.particles.affine = Vec::new(),
+                .resize(self.particles.len(), Matrix::<D>::zeros());
+        } else {
+            self.particles.affine = Vec::new();
         }
         Ok(())
     }
@@ -422,7 +436,7 @@ impl<const D: usize> Sim<D> {
             )));
         }
         let ps = &mut self.particles;
-        let apic = matches!(self.options.transfer, Transfer::Apic);
+        let apic = self.options.transfer.is_affine();
         ps.position.extend_from_slice(positions);
         ps.reference_position.extend_from_slice(positions);
         match velocities {

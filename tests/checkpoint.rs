@@ -53,6 +53,17 @@ fn elastic_disks_apic() {
     restart_is_bit_identical("disks", || colliding_disks(20).unwrap(), 17, 23);
 }
 
+/// The MLS transfer is stored (and its affine matrices) like APIC's.
+#[test]
+fn elastic_disks_mls() {
+    let build = || {
+        let mut sim = colliding_disks(20).unwrap();
+        sim.set_transfer(Transfer::Mls).unwrap();
+        sim
+    };
+    restart_is_bit_identical("disks_mls", build, 17, 23);
+}
+
 /// RK2 with VC2 (boundary points from the lattice at the first step), gravity, walls, MUSL.
 #[test]
 fn rk2_vc2_block_on_walls_musl() {

@@ -79,7 +79,7 @@ fn call() -> impl Strategy<Value = Call> {
         1 => (0u32..6, 0u32..7, prop_oneof![Just(2.0), Just(3.0), Just(1.0), Just(0.3), real()])
             .prop_map(|(a, b, c)| Call::SetShape(a, b, c)),
         1 => (0u32..3, 0u32..5).prop_map(|(a, b)| Call::SetIntegration(a, b)),
-        1 => (0u32..3, real()).prop_map(|(a, b)| Call::SetTransfer(a, b)),
+        1 => (0u32..4, real()).prop_map(|(a, b)| Call::SetTransfer(a, b)),
         1 => (0u32..3).prop_map(Call::SetScheme),
         1 => prop::array::uniform3(real()).prop_map(Call::SetGravity),
         1 => (0u32..4, -2i32..3, 0u32..5, real()).prop_map(|(a, s, k, f)| Call::SetBoundary(a, s, k, f)),

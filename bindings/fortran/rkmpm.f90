@@ -70,6 +70,7 @@ module rkmpm
    ! RkmpmTransfer (uint32_t)
    integer(c_int32_t), parameter, public :: RKMPM_TRANSFER_PIC_FLIP = 0
    integer(c_int32_t), parameter, public :: RKMPM_TRANSFER_APIC = 1
+   integer(c_int32_t), parameter, public :: RKMPM_TRANSFER_MLS = 2
    ! RkmpmScheme (uint32_t)
    integer(c_int32_t), parameter, public :: RKMPM_SCHEME_USL = 0
    integer(c_int32_t), parameter, public :: RKMPM_SCHEME_MUSL = 1

@@ -899,7 +899,7 @@ static void option_rows(void) {
   }
   ROW("set_transfer.unknown_transfer", RKMPM_ERR_INVALID_ARGUMENT) {
     Fixture f = block(2);
-    CALL(f.sim, rkmpm_sim_set_transfer(f.sim, 2, 0.0));
+    CALL(f.sim, rkmpm_sim_set_transfer(f.sim, 3, 0.0));
     CALL(f.sim, rkmpm_sim_set_transfer(f.sim, UINT32_MAX, 0.0));
     drop(&f);
   }
@@ -1919,6 +1919,25 @@ static void step_rows(void) {
     CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
     /* A refused step is not a first step: the options can still change. */
     RKMPM_CHECK(rkmpm_sim_set_transfer(f.sim, RKMPM_TRANSFER_PIC_FLIP, 0.0));
+    drop(&f);
+  }
+  ROW("step.mls_without_quadratic_or_cubic_bspline", RKMPM_ERR_UNSUPPORTED) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_transfer(f.sim, RKMPM_TRANSFER_MLS, 0.0));
+    RKMPM_CHECK(rkmpm_sim_set_shape(f.sim, RKMPM_SHAPE_LINEAR, 0, 0.0));
+    CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
+    RKMPM_CHECK(rkmpm_sim_set_shape(f.sim, RKMPM_SHAPE_RK, 1, 2.0));
+    CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
+    /* With the quadratic B-spline it runs. */
+    RKMPM_CHECK(rkmpm_sim_set_shape(f.sim, RKMPM_SHAPE_BSPLINE2, 0, 0.0));
+    RKMPM_CHECK(rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
+    drop(&f);
+  }
+  ROW("step.mls_with_vc", RKMPM_ERR_UNSUPPORTED) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_transfer(f.sim, RKMPM_TRANSFER_MLS, 0.0));
+    RKMPM_CHECK(rkmpm_sim_set_integration(f.sim, RKMPM_INTEGRATION_VC, 1));
+    CALL(f.sim, rkmpm_sim_step(f.sim, stable_dt(&f, 0.5)));
     drop(&f);
   }
   ROW("step.contact_with_musl", RKMPM_ERR_UNSUPPORTED) {

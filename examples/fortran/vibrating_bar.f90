@@ -1,12 +1,13 @@
 !> Axial vibrating bar (METHOD.md section 6.5) through the Fortran module, in 2D or 3D.
 !>
-!>   usage: vibrating_bar_f <2|3> <output file>
+!>   usage: vibrating_bar_f <2|3> <output file> [apic|mls]
 !>
 !> The same problem, set-up, checks and output as examples/c/vibrating_bar.c, computed with the
 !> same operations in the same order, so the particle file equals the C one value for value:
 !> bar L = 1 fixed at x = 0 and free at x = L, v(X, t) = v0 cos(omega t) sin(beta X),
 !> beta = pi / (2 L), omega = beta sqrt(E / rho); 32 cells along the bar (grid 40 x 4 (x 4)),
-!> 2 particles per cell per direction, E = 100, rho = 1, nu = 0, quadratic B-spline, APIC, USL,
+!> 2 particles per cell per direction, E = 100, rho = 1, nu = 0, quadratic B-spline, APIC (or MLS
+!> when the third argument says so), USL,
 !> dt = stable_dt(0.2), run to one period T with the last step shortened.
 !> Checks: max |v_cm - exact| <= 3% of v0 S and the period from the zero crossings of v_cm within
 !> 1% of T. Writes one particle per line: positions, then velocities (17 significant digits).
@@ -28,9 +29,18 @@ program vibrating_bar
    real(c_double) :: amplitude, dt, dt_step, t, momentum, v_cm, exact, error, max_error
    real(c_double) :: a, b, t_down, t_up, relative_error, measured, period_error
    real(c_double), allocatable :: x(:, :), v(:, :), vol(:), mass(:), x_ref(:, :), t_hist(:), v_hist(:)
-   logical :: failed
+   logical :: failed, mls
 
-   if (command_argument_count() /= 2) call usage()
+   if (command_argument_count() /= 2 .and. command_argument_count() /= 3) call usage()
+   mls = .false.
+   if (command_argument_count() == 3) then
+      call get_command_argument(3, arg)
+      if (trim(arg) == 'mls') then
+         mls = .true.
+      else if (trim(arg) /= 'apic') then
+         call usage()
+      end if
+   end if
    call get_command_argument(1, arg)
    if (trim(arg) == '2') then
       dim = 2
@@ -63,7 +73,11 @@ program vibrating_bar
    end if
    call sim%set_shape(RKMPM_SHAPE_BSPLINE2)
    call sim%set_integration(RKMPM_INTEGRATION_MP)
-   call sim%set_transfer(RKMPM_TRANSFER_APIC)
+   if (mls) then
+      call sim%set_transfer(RKMPM_TRANSFER_MLS)
+   else
+      call sim%set_transfer(RKMPM_TRANSFER_APIC)
+   end if
    call sim%set_scheme(RKMPM_SCHEME_USL)
    call sim%set_boundary(0, RKMPM_SIDE_LOW, RKMPM_BOUNDARY_FIXED)
    call sim%add_material_linear_elastic(density, young, poisson, material)
@@ -210,7 +224,7 @@ program vibrating_bar
 contains
 
    subroutine usage()
-      write (error_unit, '(a)') 'usage: vibrating_bar_f <2|3> <output file>'
+      write (error_unit, '(a)') 'usage: vibrating_bar_f <2|3> <output file> [apic|mls]'
       error stop 2
    end subroutine usage
 

@@ -49,6 +49,12 @@ fn methods() -> Vec<Method> {
             transfer: apic,
         },
         Method {
+            name: "B-spline 2 (MLS)",
+            shape: Shape::BSpline2,
+            integration: mp,
+            transfer: Transfer::Mls,
+        },
+        Method {
             name: "B-spline 3",
             shape: Shape::BSpline3,
             integration: mp,
@@ -87,7 +93,7 @@ struct Row {
     run: Result<MmsRun, String>,
 }
 
-const COLORS: [RGBColor; 7] = [
+const COLORS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -95,6 +101,7 @@ const COLORS: [RGBColor; 7] = [
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -15,7 +15,7 @@
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
 //! `--header` (print the CSV header first), `--phases` (time per phase on stderr),
 //! `--stored-stencils` (B-spline stencils stored node by node, as before the 1D factors),
-//! `--transfer apic|pic|flip`, `--gravity` (−9.81 m/s² along the last axis),
+//! `--transfer apic|pic|flip|mls`, `--gravity` (−9.81 m/s² along the last axis),
 //! `--material neo-hookean|drucker-prager` (Drucker–Prager with a cohesion so high that the
 //! block stays elastic, so the return mapping runs and finds nothing), `--padding CELLS` (that
 //! many more empty cells on every side), `--memory` (bytes per particle and per node on
@@ -119,7 +119,7 @@ fn parse() -> Result<Args, String> {
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
-                     [--transfer apic|pic|flip] [--gravity] [--material neo-hookean|drucker-prager] \
+                     [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
                      [--padding CELLS] [--memory]"
                         .into(),
                 )
@@ -169,6 +169,7 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         Some("apic") => Transfer::Apic,
         Some("pic") => Transfer::PicFlip { flip: 0.0 },
         Some("flip") => Transfer::PicFlip { flip: 0.99 },
+        Some("mls") => Transfer::Mls,
         Some(t) => return Err(format!("unknown transfer {t}")),
     };
     let m = per_direction(a.particles, D);
@@ -295,6 +296,7 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         .sum();
     let transfer_name = match transfer {
         Transfer::Apic => "apic",
+        Transfer::Mls => "mls",
         Transfer::PicFlip { .. } => "pic",
     };
     if a.header {

@@ -55,6 +55,10 @@ pub type RkmpmTransfer = u32;
 pub const RKMPM_TRANSFER_PIC_FLIP: RkmpmTransfer = 0;
 /// Affine particle-in-cell (the default).
 pub const RKMPM_TRANSFER_APIC: RkmpmTransfer = 1;
+/// Moving-least-squares MPM (Hu et al. 2018): APIC with the MLS gradient in the force and the
+/// velocity gradient; quadratic or cubic B-spline only, without VC (else the first step fails
+/// with `RKMPM_ERR_UNSUPPORTED`).
+pub const RKMPM_TRANSFER_MLS: RkmpmTransfer = 2;
 
 /// Update scheme (`rkmpm_sim_set_scheme`).
 pub type RkmpmScheme = u32;
@@ -415,8 +419,9 @@ pub unsafe extern "C" fn rkmpm_sim_set_integration(
 }
 
 /// Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] is read only
-/// for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2 is refused by the first
-/// step (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
+/// for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2, and MLS with a shape
+/// function other than the quadratic or cubic B-spline or with VC, are refused by the first step
+/// (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
 ///
 /// # Safety
 /// `sim` must be a live handle.
@@ -431,6 +436,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
         let transfer = match transfer {
             RKMPM_TRANSFER_PIC_FLIP => Transfer::PicFlip { flip: flip_ratio },
             RKMPM_TRANSFER_APIC => Transfer::Apic,
+            RKMPM_TRANSFER_MLS => Transfer::Mls,
             other => return Err(unknown_enum("transfer", other)),
         };
         with_sim!(&mut s.sim, m => m.set_transfer(transfer))?;

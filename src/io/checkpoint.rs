@@ -301,6 +301,7 @@ fn write_options<const D: usize>(w: &mut Writer, sim: &Sim<D>) {
             w.f64(flip);
         }
         Transfer::Apic => w.u32(1),
+        Transfer::Mls => w.u32(2),
     }
     w.u32(match o.scheme {
         Scheme::Usl => 0,
@@ -340,6 +341,7 @@ fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> 
     let transfer = match r.u32()? {
         0 => Transfer::PicFlip { flip: r.f64()? },
         1 => Transfer::Apic,
+        2 => Transfer::Mls,
         other => return Err(corrupt(format!("unknown transfer tag {other}"))),
     };
     let scheme = match r.u32()? {
@@ -537,10 +539,10 @@ impl<const D: usize> Sim<D> {
             return Err(corrupt(format!("particle {p} lies outside the grid")));
         }
         let n = ps.len();
-        let apic = matches!(sim.options.transfer, crate::sim::Transfer::Apic);
+        let apic = sim.options.transfer.is_affine();
         if ps.affine.len() != if apic { n } else { 0 } {
             return Err(corrupt(format!(
-                "{} APIC matrices for {n} particles under {:?}",
+                "{} affine matrices for {n} particles under {:?}",
                 ps.affine.len(),
                 sim.options.transfer
             )));

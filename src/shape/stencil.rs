@@ -18,6 +18,7 @@ use rayon::prelude::*;
 
 impl<const D: usize> Gathered<D> {
     /// All sums zero.
+    #[inline(always)]
     pub fn zero() -> Self {
         Gathered {
             velocity: Vector::zeros(),
@@ -37,7 +38,10 @@ pub struct ScatterInput<const D: usize> {
     pub momentum: Vector<D>,
     /// `m C` under APIC.
     pub affine: Option<Matrix<D>>,
-    /// `−V σ` and the body acceleration `b`, when mass and force are mapped too.
+    /// Map the mass too (the first map of a step).
+    pub with_mass: bool,
+    /// `−V σ` and the body acceleration `b`, when the force is mapped too (not under MLS, whose
+    /// force rides on the momentum).
     pub force: Option<(Matrix<D>, Vector<D>)>,
     /// Add `m Ψ b` (there is gravity or a body-force callback).
     pub with_body_force: bool,
@@ -111,8 +115,9 @@ pub trait StencilView<const D: usize>: Sync {
     }
 
     /// The grid-to-particle sums of particle `p` at `x_p` from the node velocities `v` (and
-    /// `v_old` for FLIP); the `affine` sum only when asked for. Node by node here; a view may
-    /// factor the sums (tensor-product stencils do, row by row).
+    /// `v_old` for FLIP); the `affine` and `gradient` sums only when asked for (zero otherwise).
+    /// Node by node here; a view may factor the sums (tensor-product stencils do, row by row).
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn gather(
         &self,
@@ -122,12 +127,14 @@ pub trait StencilView<const D: usize>: Sync {
         v: &[Vector<D>],
         v_old: Option<&[Vector<D>]>,
         affine: bool,
+        gradient: bool,
     ) -> Gathered<D> {
-        gather_node_by_node(self, grid, p, xp, v, v_old, affine)
+        gather_node_by_node(self, grid, p, xp, v, v_old, affine, gradient)
     }
 }
 
 /// The grid-to-particle sums of [`StencilView::gather`], node by node.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn gather_node_by_node<const D: usize, S: StencilView<D> + ?Sized>(
     view: &S,
@@ -137,6 +144,7 @@ pub fn gather_node_by_node<const D: usize, S: StencilView<D> + ?Sized>(
     v: &[Vector<D>],
     v_old: Option<&[Vector<D>]>,
     affine: bool,
+    gradient: bool,
 ) -> Gathered<D> {
     let mut g = Gathered::zero();
     view.for_each_with_offset(grid, p, affine.then_some(xp), |_, node, offset| {
@@ -149,7 +157,9 @@ pub fn gather_node_by_node<const D: usize, S: StencilView<D> + ?Sized>(
         if affine {
             g.affine += (w * vi) * offset.transpose();
         }
-        g.gradient += vi * node.gradient.transpose();
+        if gradient {
+            g.gradient += vi * node.gradient.transpose();
+        }
     });
     g
 }
@@ -381,8 +391,9 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// momentum `m v + m C (x_I − x_p)` split into a row part and an axis-0 part, the force
     /// `−V σ ∇Ψ = w_0' (c σ_0) + w_0 (Σ_a c_a σ_a)` with the row sums taken once.
     ///
-    /// `AFFINE`: `input.affine` is given; `FORCE`: `input.force` is given; `EXTRA`: the body
-    /// force or the mass gradient may be asked for (checked at run time). Nodes with a zero
+    /// `AFFINE`: `input.affine` is given; `MASS`: the mass is mapped; `FORCE`: `input.force` is
+    /// given; `EXTRA`: the body force (with `FORCE`) or the mass gradient may be asked for
+    /// (checked at run time). Nodes with a zero
     /// value and gradient are skipped; for `W ≥ 3` (B-splines that are C¹) a zero value implies
     /// a zero gradient, so the value alone decides.
     ///
@@ -391,7 +402,12 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     // Index loops over the axes: each index reads several per-axis tables at once.
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
-    unsafe fn scatter_rows<const AFFINE: bool, const FORCE: bool, const EXTRA: bool>(
+    unsafe fn scatter_rows<
+        const AFFINE: bool,
+        const MASS: bool,
+        const FORCE: bool,
+        const EXTRA: bool,
+    >(
         &self,
         p: usize,
         input: &ScatterInput<D>,
@@ -410,11 +426,12 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             .force
             .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
         // Axis-0 part of the affine momentum, per node of a row.
-        let affine0: [Vector<D>; W] = if AFFINE {
-            std::array::from_fn(|k0| mc.column(0) * offset(0, k0))
-        } else {
-            [Vector::zeros(); W]
-        };
+        let mut affine0 = [Vector::<D>::zeros(); W];
+        if AFFINE {
+            for (k0, a0) in affine0.iter_mut().enumerate() {
+                *a0 = mc.column(0) * offset(0, k0);
+            }
+        }
         let mut k = [0usize; D];
         let mut row = base;
         for _ in 0..W.pow(D as u32 - 1) {
@@ -460,21 +477,21 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                 }
                 out.touch_unchecked(n);
                 scatter_add(out.momentum, n, value * (momentum_row + affine0[k0]));
-                if FORCE {
+                if MASS {
                     scatter_add(out.mass, n, m * value);
+                    if EXTRA && input.with_gradient {
+                        scatter_add(out.mass_gradient, n, m * gradient);
+                    }
+                }
+                if FORCE {
                     scatter_add(out.force, n, dw[0][k0] * force0 + w[0][k0] * force_rest);
-                    if EXTRA {
-                        if input.with_gradient {
-                            scatter_add(out.mass_gradient, n, m * gradient);
-                        }
-                        if input.with_body_force {
-                            let field = if input.keep_body_force {
-                                out.body_force
-                            } else {
-                                out.force
-                            };
-                            scatter_add(field, n, (m * value) * b);
-                        }
+                    if EXTRA && input.with_body_force {
+                        let field = if input.keep_body_force {
+                            out.body_force
+                        } else {
+                            out.force
+                        };
+                        scatter_add(field, n, (m * value) * b);
                     }
                 }
             }
@@ -513,14 +530,36 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
     /// general version when there is a body force or a mass gradient to add.
     #[inline(always)]
     unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
-        let extra = input.with_body_force || input.with_gradient;
-        match (input.affine.is_some(), input.force.is_some(), extra) {
-            (true, true, false) => self.scatter_rows::<true, true, false>(p, input, out),
-            (false, true, false) => self.scatter_rows::<false, true, false>(p, input, out),
-            (true, false, _) => self.scatter_rows::<true, false, false>(p, input, out),
-            (false, false, _) => self.scatter_rows::<false, false, false>(p, input, out),
-            (true, true, true) => self.scatter_rows::<true, true, true>(p, input, out),
-            (false, true, true) => self.scatter_rows::<false, true, true>(p, input, out),
+        let extra = input.with_mass && (input.with_body_force || input.with_gradient);
+        let (affine, mass, force) = (
+            input.affine.is_some(),
+            input.with_mass,
+            input.force.is_some(),
+        );
+        match (affine, mass, force, extra) {
+            // The second map of MUSL: momentum only.
+            (true, false, _, _) => self.scatter_rows::<true, false, false, false>(p, input, out),
+            (false, false, _, _) => self.scatter_rows::<false, false, false, false>(p, input, out),
+            // APIC and PIC/FLIP: mass, momentum and force.
+            (true, true, true, false) => {
+                self.scatter_rows::<true, true, true, false>(p, input, out)
+            }
+            (false, true, true, false) => {
+                self.scatter_rows::<false, true, true, false>(p, input, out)
+            }
+            (true, true, true, true) => self.scatter_rows::<true, true, true, true>(p, input, out),
+            (false, true, true, true) => {
+                self.scatter_rows::<false, true, true, true>(p, input, out)
+            }
+            // MLS: mass and momentum (the force is in the momentum).
+            (true, true, false, false) => {
+                self.scatter_rows::<true, true, false, false>(p, input, out)
+            }
+            (true, true, false, true) => {
+                self.scatter_rows::<true, true, false, true>(p, input, out)
+            }
+            // Mass without force or affine term: not a case the step has; node by node.
+            (false, true, false, _) => return false,
         }
         true
     }
@@ -531,7 +570,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
     /// `Σ w_0 v`, `Σ w_0' v`, `Σ w_0 (x − x_p)_0 v` are taken once, then weighted by the row's
     /// factors of the other axes: `Ψ = w_0 c`, `∂_0 Ψ = w_0' c`, `∂_a Ψ = w_0 c_a` (a ≥ 1).
     /// About 2/3 of the flops of the node-by-node sums; the same sums to round-off.
-    #[allow(clippy::needless_range_loop)]
+    #[allow(clippy::needless_range_loop, clippy::too_many_arguments)]
     #[inline(always)]
     fn gather(
         &self,
@@ -541,6 +580,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
         v: &[Vector<D>],
         v_old: Option<&[Vector<D>]>,
         affine: bool,
+        gradient: bool,
     ) -> Gathered<D> {
         let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
         let first = &self.first[p];
@@ -562,7 +602,9 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                 let wo = wk * off0[k0];
                 for i in 0..D {
                     s_w[i] += wk * vi[i];
-                    s_dw[i] += dwk * vi[i];
+                    if gradient {
+                        s_dw[i] += dwk * vi[i];
+                    }
                     if affine {
                         s_wo[i] += wo * vi[i];
                     }
@@ -586,16 +628,20 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
             }
             g.velocity += c * s_w;
             g.velocity_change += c * s_dv;
-            g.gradient.column_mut(0).axpy(c, &s_dw, 1.0);
+            if gradient {
+                g.gradient.column_mut(0).axpy(c, &s_dw, 1.0);
+            }
             if affine {
                 g.affine.column_mut(0).axpy(c, &s_wo, 1.0);
             }
             for a in 1..D {
-                let mut c_a = 1.0;
-                for b in 1..D {
-                    c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+                if gradient {
+                    let mut c_a = 1.0;
+                    for b in 1..D {
+                        c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+                    }
+                    g.gradient.column_mut(a).axpy(c_a, &s_w, 1.0);
                 }
-                g.gradient.column_mut(a).axpy(c_a, &s_w, 1.0);
                 if affine {
                     g.affine.column_mut(a).axpy(c * offset(a, k[a]), &s_w, 1.0);
                 }

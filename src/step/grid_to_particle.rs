@@ -224,8 +224,38 @@ pub fn velocity_gradient<const D: usize>(
     l
 }
 
-/// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish<D>>`).
-pub type NoFinish<const D: usize> = fn(usize, &mut ParticleUpdate<D>, &mut PlasticState) -> bool;
+/// The MLS velocity gradient `L_p = D⁻¹ Σ_I Ψ_I(x_p) v_I ⊗ (x_I − x_p)` with the current node
+/// velocities (`inverse_inertia = D⁻¹`); exact for a linear velocity field.
+#[inline]
+pub fn mls_velocity_gradient<const D: usize>(
+    stencils: &impl StencilView<D>,
+    grid: &Grid<D>,
+    nodes: &GridNodes<D>,
+    p: usize,
+    xp: &Vector<D>,
+    inverse_inertia: f64,
+) -> Matrix<D> {
+    stencils
+        .gather(grid, p, xp, &nodes.velocity, None, true, false)
+        .affine
+        * inverse_inertia
+}
+
+/// What completes a particle's new state while it is in registers (the constitutive update and
+/// the checks under USL), and says whether it is admissible; `history` is the particle's new
+/// history slot, or scratch for particles without one.
+pub trait Finish<const D: usize>: Sync {
+    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState) -> bool;
+}
+
+/// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
+pub struct NoFinish;
+
+impl<const D: usize> Finish<D> for NoFinish {
+    fn finish(&self, _: usize, _: &mut ParticleUpdate<D>, _: &mut PlasticState) -> bool {
+        true
+    }
+}
 
 /// The grid fields particles read: one for all, or one per body under contact.
 #[derive(Clone, Copy)]
@@ -267,7 +297,35 @@ pub fn grid_to_particle<const D: usize, F>(
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
 ) where
-    F: Fn(usize, &mut ParticleUpdate<D>, &mut PlasticState) -> bool + Sync,
+    F: Finish<D>,
+{
+    // One compiled pass per case: MLS takes no gradient sum.
+    if plan.mls {
+        gather_all::<true, D, F>(
+            grid, ps, stencils, fields, rigid, plan, dt, finish, new, admissible,
+        )
+    } else {
+        gather_all::<false, D, F>(
+            grid, ps, stencils, fields, rigid, plan, dt, finish, new, admissible,
+        )
+    }
+}
+
+/// [`grid_to_particle`] with `MLS = plan.mls`.
+#[allow(clippy::too_many_arguments)]
+fn gather_all<const MLS: bool, const D: usize, F>(
+    grid: &Grid<D>,
+    ps: &Particles<D>,
+    stencils: &impl StencilView<D>,
+    fields: Fields<'_, D>,
+    rigid: &[Option<Vector<D>>],
+    plan: TransferPlan,
+    dt: f64,
+    finish: Option<&F>,
+    new: &mut NewState<D>,
+    admissible: &mut Vec<bool>,
+) where
+    F: Finish<D>,
 {
     new.prepare(ps, plan.apic);
     let flip = plan.flip > 0.0;
@@ -290,8 +348,14 @@ pub fn grid_to_particle<const D: usize, F>(
             &nodes.velocity,
             flip.then_some(&nodes.velocity_old[..]),
             apic_inertia,
+            !MLS,
         );
-        let (v_pic, dv, b, l) = (g.velocity, g.velocity_change, g.affine, g.gradient);
+        let (v_pic, dv, b) = (g.velocity, g.velocity_change, g.affine);
+        // MLS: the velocity gradient is the affine matrix `C_p = B_p / D`.
+        let l = match plan.inverse_inertia {
+            Some(inv) if MLS => b * inv,
+            _ => g.gradient,
+        };
         u.position = xp + dt * v_pic;
         u.velocity = if flip {
             (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
@@ -316,8 +380,9 @@ pub fn grid_to_particle<const D: usize, F>(
             let mut u = ParticleUpdate::default();
             gather(p, &mut u);
             // SAFETY: every particle index is visited by one task only.
-            let ok = finish
-                .is_none_or(|f| f(p, &mut u, unsafe { writer.plastic(p) }.unwrap_or(scratch)));
+            let ok = finish.is_none_or(|f| {
+                f.finish(p, &mut u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
+            });
             unsafe { writer.store(p, &u) };
             ok
         })

@@ -32,7 +32,8 @@ pub use timestep::Progress;
 
 pub use bins::Bins;
 pub use grid_to_particle::{
-    grid_to_particle, velocity_gradient, Fields, NewState, NewStateWriter, NoFinish, ParticleUpdate,
+    grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, NewState,
+    NewStateWriter, NoFinish, ParticleUpdate,
 };
 pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
@@ -99,6 +100,9 @@ pub struct TransferPlan {
     pub apic: bool,
     /// `1 / D_p` when the shape function's APIC inertia is a constant multiple of the identity.
     pub inverse_inertia: Option<f64>,
+    /// MLS: the force rides on the affine momentum and the velocity gradient is `C_p` (then
+    /// `apic` is on and `inverse_inertia` is given).
+    pub mls: bool,
 }
 
 impl<const D: usize> Sim<D> {
@@ -194,6 +198,23 @@ impl<const D: usize> Sim<D> {
                  use RKMPM_TRANSFER_PIC_FLIP",
             ));
         }
+        if self.options.transfer == Transfer::Mls {
+            if self.shape.apic_inertia(self.grid.cell_size).is_none() {
+                return Err(Error::new(
+                    ErrorKind::Unsupported,
+                    "the MLS transfer needs the quadratic or cubic B-spline shape function (a \
+                     constant APIC inertia); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP \
+                     with other shape functions",
+                ));
+            }
+            if self.vc.is_some() {
+                return Err(Error::new(
+                    ErrorKind::Unsupported,
+                    "the MLS transfer does not go with VC integration (MLS replaces the gradients \
+                     VC corrects); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP with VC",
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -203,14 +224,16 @@ impl<const D: usize> Sim<D> {
                 flip,
                 apic: false,
                 inverse_inertia: None,
+                mls: false,
             },
-            Transfer::Apic => TransferPlan {
+            Transfer::Apic | Transfer::Mls => TransferPlan {
                 flip: 0.0,
                 apic: true,
                 inverse_inertia: self
                     .shape
                     .apic_inertia(self.grid.cell_size)
                     .map(|d| 1.0 / d),
+                mls: self.options.transfer == Transfer::Mls,
             },
         }
     }
@@ -389,6 +412,10 @@ impl<const D: usize> Sim<D> {
             gravity: self.options.gravity,
             body,
             vc: self.vc.as_ref(),
+            mls: plan
+                .inverse_inertia
+                .filter(|_| plan.mls)
+                .map(|inverse_inertia| (dt, inverse_inertia)),
         };
         let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
         // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
@@ -491,33 +518,13 @@ impl<const D: usize> Sim<D> {
         // 6. (defined here, run inside the gather under USL) Constitutive update: elastic models
         //    from F, history models by return mapping from their state and the increment
         //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
-        let materials = &self.materials;
-        let walls = &self.options.walls;
-        let any_wall = walls.any_wall();
-        let finish = |p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState| -> bool {
-            let j = crate::determinant(&u.deformation_gradient);
-            if j.is_nan() || j <= 0.0 {
-                // Inverted or not finite: the checks reject the step; no stress to compute.
-                u.stress = Matrix::zeros();
-                u.pressure = 0.0;
-                return false;
-            }
-            let material = &materials[ps.material[p] as usize];
-            (u.stress, u.pressure) = if material.is_elastic() {
-                material.elastic_stress(&u.deformation_gradient, j)
-            } else {
-                let f = embed3(&u.deformation_gradient);
-                let f_old = embed3(&ps.deformation_gradient[p]);
-                let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
-                let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
-                *history = state;
-                (block(&s3), pressure(&s3))
-            };
-            // Particles stay inside the walls (see `Walls::clamp_to_walls`).
-            if any_wall {
-                walls.clamp_to_walls(grid, &mut u.position);
-            }
-            u.is_admissible(grid, j)
+        let finish = ConstitutiveUpdate {
+            grid,
+            particles: ps,
+            materials: &self.materials,
+            walls: &self.options.walls,
+            any_wall: self.options.walls.any_wall(),
+            dt,
         };
         let mut admissible = std::mem::take(&mut work.admissible);
 
@@ -569,7 +576,12 @@ impl<const D: usize> Sim<D> {
                 .par_iter_mut()
                 .enumerate()
                 .for_each(|(p, f)| {
-                    let l = velocity_gradient(stencils, nodes, p);
+                    let l = match (plan.mls, plan.inverse_inertia) {
+                        (true, Some(inv)) => {
+                            mls_velocity_gradient(stencils, grid, nodes, p, &ps.position[p], inv)
+                        }
+                        _ => velocity_gradient(stencils, nodes, p),
+                    };
                     *f = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
                 });
         }
@@ -612,7 +624,7 @@ impl<const D: usize> Sim<D> {
                     // SAFETY: every particle index is visited by one task only.
                     unsafe {
                         let mut u = writer.get(p);
-                        let ok = finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
+                        let ok = finish.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
                         writer.store(p, &u);
                         ok
                     }
@@ -701,6 +713,49 @@ impl<const D: usize> Sim<D> {
             b.deformation_gradient[k] = u.deformation_gradient;
             b.area_normal[k] = u.area_normal;
         }
+    }
+}
+
+/// Step 6, the constitutive update of one particle (run inside the gather under USL): elastic
+/// models from `F`, history models by return mapping from their state and the increment
+/// `ΔF = F^{n+1} (F^n)⁻¹`; particles kept inside the walls; the checks.
+struct ConstitutiveUpdate<'a, const D: usize> {
+    grid: &'a crate::grid::Grid<D>,
+    particles: &'a crate::particles::Particles<D>,
+    materials: &'a [crate::material::Material],
+    walls: &'a crate::boundary::Walls<D>,
+    any_wall: bool,
+    dt: f64,
+}
+
+impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
+    // Always inlined into the gather, which keeps the new state in registers.
+    #[inline(always)]
+    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState) -> bool {
+        let j = crate::determinant(&u.deformation_gradient);
+        if j.is_nan() || j <= 0.0 {
+            // Inverted or not finite: the checks reject the step; no stress to compute.
+            u.stress = Matrix::zeros();
+            u.pressure = 0.0;
+            return false;
+        }
+        let ps = self.particles;
+        let material = &self.materials[ps.material[p] as usize];
+        (u.stress, u.pressure) = if material.is_elastic() {
+            material.elastic_stress(&u.deformation_gradient, j)
+        } else {
+            let f = embed3(&u.deformation_gradient);
+            let f_old = embed3(&ps.deformation_gradient[p]);
+            let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
+            let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, self.dt);
+            *history = state;
+            (block(&s3), pressure(&s3))
+        };
+        // Particles stay inside the walls (see `Walls::clamp_to_walls`).
+        if self.any_wall {
+            self.walls.clamp_to_walls(self.grid, &mut u.position);
+        }
+        u.is_admissible(self.grid, j)
     }
 }
 

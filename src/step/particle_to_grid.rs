@@ -22,6 +22,10 @@ pub struct Forces<'a, const D: usize> {
     pub body: Option<&'a [Vector<D>]>,
     /// Gradient corrections of VC integration (internal force only), if on.
     pub vc: Option<&'a VcCorrection<D>>,
+    /// MLS (`Some((Δt, 1/D))`, see [`crate::sim::Transfer::Mls`]): `Δt f` goes into the
+    /// momentum, the internal force through the affine term `m C − (Δt/D) V σ` and the body force
+    /// through `m (v + Δt b)`; nothing is added to `force`.
+    pub mls: Option<(f64, f64)>,
 }
 
 /// Scatters particle quantities to the nodes of their stencils and marks those nodes active.
@@ -54,9 +58,12 @@ pub fn particle_to_grid<const D: usize, S, A>(
     let with_gradient = !out.mass_gradient.is_null() && forces.is_some();
     let keep_body_force = !out.body_force.is_null();
     let with_lumping = !out.lumping.0.is_null();
-    // No body-force sums when there is no gravity and no body-force callback.
-    let with_body_force =
-        forces.is_some_and(|f| f.body.is_some() || f.gravity != Vector::<D>::zeros());
+    let with_mass = forces.is_some();
+    let mls = forces.and_then(|f| f.mls);
+    // No body-force sums when there is no gravity and no body-force callback (nor under MLS,
+    // which adds the body force to the momentum).
+    let with_body_force = mls.is_none()
+        && forces.is_some_and(|f| f.body.is_some() || f.gravity != Vector::<D>::zeros());
     let scatter = |p: usize| {
         if body.is_some_and(|b| ps.material[p] != b) {
             return;
@@ -68,7 +75,7 @@ pub fn particle_to_grid<const D: usize, S, A>(
         let v = velocity(p);
         let c = affine.as_ref().map(|a| a(p));
         let xp = ps.position[p];
-        let force = forces.map(|f| {
+        let mut force = forces.map(|f| {
             let b = match f.body {
                 Some(b) => f.gravity + b[p],
                 None => f.gravity,
@@ -76,8 +83,14 @@ pub fn particle_to_grid<const D: usize, S, A>(
             (-ps.volume(p) * ps.stress[p], b)
         });
         // Momentum of the particle and its affine part, `m v + m C (x_I − x_p)`.
-        let mv = m * v;
-        let mc = c.map(|c| m * c);
+        let mut mv = m * v;
+        let mut mc = c.map(|c| m * c);
+        if let (Some((dt, inverse_inertia)), Some((vs, b))) = (mls, force) {
+            // MLS: `Δt f_I = Ψ_I (Δt m b + (Δt/D) (−V σ)(x_I − x_p))`, on the momentum.
+            mv += (dt * m) * b;
+            mc = mc.map(|mc| mc + (dt * inverse_inertia) * vs);
+            force = None;
+        }
         let node_sums = |s: usize, node: StencilNode<D>, offset: Vector<D>| {
             let StencilNode {
                 node: n,
@@ -106,15 +119,17 @@ pub fn particle_to_grid<const D: usize, S, A>(
                         }
                     }
                 }
+                if with_mass {
+                    scatter_add(out.mass, n, m * w);
+                    if with_gradient {
+                        scatter_add(out.mass_gradient, n, m * g);
+                    }
+                }
                 if let Some((vs, b)) = force {
                     let grad = match vc {
                         Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
                         None => g,
                     };
-                    scatter_add(out.mass, n, m * w);
-                    if with_gradient {
-                        scatter_add(out.mass_gradient, n, m * g);
-                    }
                     scatter_add(out.force, n, vs * grad);
                     if !with_body_force {
                         // Nothing to add.
@@ -132,6 +147,7 @@ pub fn particle_to_grid<const D: usize, S, A>(
             mass: m,
             momentum: mv,
             affine: mc,
+            with_mass,
             force,
             with_body_force,
             keep_body_force,

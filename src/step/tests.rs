@@ -137,14 +137,15 @@ fn apic_conserves_angular_momentum_pic_does_not() {
     );
 }
 
-fn check_bar<const D: usize>(scheme: Scheme) {
+fn check_bar<const D: usize>(scheme: Scheme, transfer: Transfer) {
     let bar = VibratingBar::default();
     let mut sim = bar.build::<D>().unwrap();
     sim.set_scheme(scheme).unwrap();
+    sim.set_transfer(transfer).unwrap();
     let r = run_vibrating_bar(&bar, &mut sim, 0.2).unwrap();
     let period_error = (r.period - r.exact_period).abs() / r.exact_period;
     eprintln!(
-        "{D}D {scheme:?}: velocity error {:.4}, period error {period_error:.5}",
+        "{D}D {scheme:?} {transfer:?}: velocity error {:.4}, period error {period_error:.5}",
         r.velocity_error
     );
     assert!(
@@ -161,16 +162,117 @@ fn check_bar<const D: usize>(scheme: Scheme) {
 }
 
 /// METHOD.md 6.5 at 32 cells along the bar with the quadratic B-spline: period within 1% and the
-/// mean-velocity history within 3% of the exact one over a whole period.
+/// mean-velocity history within 3% of the exact one over a whole period, with APIC and MLS.
 #[test]
 fn vibrating_bar_2d_matches_exact_solution() {
-    check_bar::<2>(Scheme::Usl);
-    check_bar::<2>(Scheme::Musl);
+    for transfer in [Transfer::Apic, Transfer::Mls] {
+        check_bar::<2>(Scheme::Usl, transfer);
+        check_bar::<2>(Scheme::Musl, transfer);
+    }
 }
 
 #[test]
 fn vibrating_bar_3d_matches_exact_solution() {
-    check_bar::<3>(Scheme::Usl);
+    check_bar::<3>(Scheme::Usl, Transfer::Apic);
+    check_bar::<3>(Scheme::Usl, Transfer::Mls);
+}
+
+/// MLS (Hu et al. 2018) conserves linear and angular momentum like APIC: its internal force is
+/// `−V σ M⁻¹ Ψ_I (x_I − x_p)`, which sums to zero over the nodes (`Σ Ψ_I (x_I − x_p) = 0`) and
+/// has zero torque for a symmetric stress; the round trip keeps `m D C` as APIC does.
+#[test]
+fn mls_conserves_linear_and_angular_momentum() {
+    for shape in [Shape::BSpline2, Shape::BSpline3] {
+        for scheme in [Scheme::Usl, Scheme::Musl] {
+            let mut sim = block::<2>(shape, Transfer::Mls);
+            sim.set_scheme(scheme).unwrap();
+            let (p0, l0) = (sim.particles().momentum(), angular_momentum_2d(&sim));
+            let dt = sim.stable_dt(0.3).unwrap();
+            for _ in 0..20 {
+                sim.step(dt).unwrap();
+            }
+            let (p1, l1) = (sim.particles().momentum(), angular_momentum_2d(&sim));
+            // The bounds of the APIC tests above: sums of ~500 terms, round-off ~1e-14 relative.
+            assert!(
+                (p1 - p0).norm() < 1e-12 * p0.norm(),
+                "{shape:?} {scheme:?}: momentum {p0} -> {p1}"
+            );
+            assert!(
+                (l1 - l0).abs() < 1e-10 * l0.abs(),
+                "{shape:?} {scheme:?}: angular momentum {l0} -> {l1}"
+            );
+            assert_eq!(sim.particles().affine.len(), sim.particles().len());
+        }
+    }
+}
+
+/// Under MLS the velocity gradient is the affine matrix: for an affine velocity field
+/// `v = A x + c` (and no stress yet) one step gives every particle, at the edge of the body too,
+/// `v = A x + c`, `C = A` and `F = I + Δt A` to round-off (the nodes' velocities are
+/// `A x_I + c` exactly, and `M⁻¹ Σ Ψ_I v_I (x_I − x_p)ᵀ` reproduces a linear field).
+#[test]
+fn mls_velocity_gradient_is_exact_for_an_affine_field() {
+    fn check<const D: usize>(shape: Shape) {
+        let mut sim = block::<D>(shape, Transfer::Mls);
+        let a = Matrix::<D>::from_fn(|i, j| 0.3 * (i as f64 + 1.0) - 0.2 * j as f64);
+        let c = Vector::<D>::from_element(0.05);
+        let x = sim.particles().position.clone();
+        let ps = &mut sim.particles;
+        for ((v, c_p), x) in ps.velocity.iter_mut().zip(&mut ps.affine).zip(&x) {
+            *v = a * x + c;
+            *c_p = a;
+        }
+        let dt = 1e-3;
+        sim.step(dt).unwrap();
+        let ps = sim.particles();
+        let f = Matrix::<D>::identity() + dt * a;
+        // Round-off of sums of O(1) terms; a first-order error would be O(h) = 0.1 here.
+        let tol = 1e-12;
+        for (p, x) in x.iter().enumerate() {
+            // The field at the particle's position at the start of the step (its stencil's).
+            let v = a * x + c;
+            assert!((ps.velocity[p] - v).norm() < tol, "{shape:?} v at {p}");
+            assert!(
+                (ps.position[p] - (x + dt * v)).norm() < tol,
+                "{shape:?} x at {p}"
+            );
+            assert!((ps.affine[p] - a).norm() < tol, "{shape:?} C at {p}");
+            assert!(
+                (ps.deformation_gradient[p] - f).norm() < tol,
+                "{shape:?} F at {p}"
+            );
+        }
+    }
+    check::<2>(Shape::BSpline2);
+    check::<2>(Shape::BSpline3);
+    check::<3>(Shape::BSpline2);
+}
+
+/// MLS needs a constant APIC inertia (quadratic or cubic B-spline) and no VC; otherwise the
+/// first step is refused and nothing changes.
+#[test]
+fn mls_is_refused_without_a_quadratic_or_cubic_bspline_or_with_vc() {
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    for (shape, vc) in [
+        (Shape::Linear, false),
+        (rk1, false),
+        (Shape::BSpline2, true),
+    ] {
+        let mut sim = block::<2>(shape, Transfer::Mls);
+        if vc {
+            sim.set_integration(crate::sim::Integration::Vc { order: 1 })
+                .unwrap();
+        }
+        let before = sim.particles().clone();
+        let e = sim.step(1e-4).unwrap_err();
+        assert_eq!(e.kind, ErrorKind::Unsupported, "{shape:?} vc {vc}: {e}");
+        assert!(e.message.contains("MLS"), "{e}");
+        assert_eq!(sim.particles(), &before);
+        assert_eq!(sim.steps(), 0);
+    }
 }
 
 /// A block resting on a slip floor under gravity keeps its tangential momentum exactly while it
@@ -467,16 +569,21 @@ fn vc_finds_the_surface_of_the_particles_at_every_step() {
 
 /// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
 /// 2 worker threads (P2G runs by colours of grid blocks; the other phases are per particle or
-/// per node), for B-splines with APIC and for RK with VC, in 2D and 3D.
+/// per node), for B-splines with APIC and MLS and for RK with VC, in 2D and 3D.
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    fn run<const D: usize>(threads: usize, shape: Shape, vc: bool) -> Particles<D> {
+    fn run<const D: usize>(
+        threads: usize,
+        shape: Shape,
+        transfer: Transfer,
+        vc: bool,
+    ) -> Particles<D> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {
-            let mut sim = block::<D>(shape, Transfer::Apic);
+            let mut sim = block::<D>(shape, transfer);
             if vc {
                 sim.set_integration(crate::sim::Integration::Vc { order: 1 })
                     .unwrap();
@@ -489,18 +596,25 @@ fn results_do_not_depend_on_the_thread_count() {
             sim.particles().clone()
         })
     }
-    for (shape, vc) in [
-        (Shape::BSpline2, false),
-        (
-            Shape::Rk {
-                order: 1,
-                support: 2.0,
-            },
-            true,
-        ),
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    for (shape, transfer, vc) in [
+        (Shape::BSpline2, Transfer::Apic, false),
+        (Shape::BSpline2, Transfer::Mls, false),
+        (rk1, Transfer::Apic, true),
     ] {
-        assert_eq!(run::<2>(1, shape, vc), run::<2>(2, shape, vc), "{shape:?}");
-        assert_eq!(run::<3>(1, shape, vc), run::<3>(2, shape, vc), "{shape:?}");
+        let (one, two) = (
+            run::<2>(1, shape, transfer, vc),
+            run::<2>(2, shape, transfer, vc),
+        );
+        assert_eq!(one, two, "{shape:?} {transfer:?}");
+        let (one, two) = (
+            run::<3>(1, shape, transfer, vc),
+            run::<3>(2, shape, transfer, vc),
+        );
+        assert_eq!(one, two, "{shape:?} {transfer:?}");
     }
 }
 
