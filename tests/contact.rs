@@ -1,7 +1,9 @@
 //! Contact between bodies (multi-velocity-field grid contact with Coulomb friction) and rigid
 //! bodies with a prescribed velocity.
 
-use rkmpm::{Boundary, ErrorKind, Integration, Material, Scheme, Shape, Side, Sim, Vector};
+use rkmpm::{
+    Boundary, ErrorKind, Integration, Material, Scheme, Shape, Side, Sim, Transfer, Vector,
+};
 
 /// A square block of `n × n` particles (2 per cell) with lower-left corner `corner`.
 fn block(corner: [f64; 2], n: usize, q: f64) -> Vec<Vector<2>> {
@@ -21,7 +23,7 @@ fn block(corner: [f64; 2], n: usize, q: f64) -> Vec<Vector<2>> {
 /// together during the impact (no slip), which takes most of the tangential velocity away.
 #[test]
 fn sliding_blocks_keep_their_tangential_velocity_with_contact() {
-    let (va, dp) = sliding_blocks(true, false);
+    let (va, dp) = sliding_blocks(true, false, false);
     eprintln!("contact: block a leaves with {va:?}; momentum change {dp:e}");
     // Measured: contact (−1.19, 1.33), one field (−1.15, 0.88). With contact the block bounces
     // and loses none of its tangential velocity (it gains some where the sliding corners push);
@@ -30,7 +32,7 @@ fn sliding_blocks_keep_their_tangential_velocity_with_contact() {
     assert!(va[1] >= 1.0, "lost tangential velocity: {va:?}");
     // The pair normal makes the corrections equal and opposite: round-off of ~300 terms.
     assert!(dp < 1e-10, "momentum changed by {dp}");
-    let (one, _) = sliding_blocks(false, false);
+    let (one, _) = sliding_blocks(false, false, false);
     eprintln!("one field: block a leaves with {one:?}");
     assert!(
         one[1] < va[1] - 0.3,
@@ -47,7 +49,7 @@ fn sliding_blocks_keep_their_tangential_velocity_with_contact() {
 /// contact correction itself is equal and opposite (the test above, to 1e-10).
 #[test]
 fn sliding_blocks_with_rk_and_vc_keep_their_tangential_velocity() {
-    let (va, dp) = sliding_blocks(true, true);
+    let (va, dp) = sliding_blocks(true, true, false);
     eprintln!("contact + RK1 + VC1: block a leaves with {va:?}; momentum change {dp:e}");
     assert!(va[0] < -1.0, "did not bounce: {va:?}");
     assert!(va[1] >= 1.0, "lost tangential velocity: {va:?}");
@@ -55,9 +57,21 @@ fn sliding_blocks_with_rk_and_vc_keep_their_tangential_velocity() {
     assert!(dp < 3e-3 * pa, "momentum changed by {dp} of {pa}");
 }
 
+/// The same collision with the MLS transfer: contact reads the mass gradient from the B-spline
+/// derivatives, which MLS alone does not store. The bounce, the kept tangential velocity and the
+/// momentum to round-off hold as with APIC.
+#[test]
+fn sliding_blocks_with_mls_keep_their_tangential_velocity() {
+    let (va, dp) = sliding_blocks(true, false, true);
+    eprintln!("contact + MLS: block a leaves with {va:?}; momentum change {dp:e}");
+    assert!(va[0] < -1.0, "did not bounce: {va:?}");
+    assert!(va[1] >= 1.0, "lost tangential velocity: {va:?}");
+    assert!(dp < 1e-10, "momentum changed by {dp}");
+}
+
 /// Two blocks sliding past each other head on (see the tests above): the mean velocity of block
 /// a at t = 0.15 and the change of total momentum.
-fn sliding_blocks(contact: bool, rk_vc: bool) -> (Vector<2>, f64) {
+fn sliding_blocks(contact: bool, rk_vc: bool, mls: bool) -> (Vector<2>, f64) {
     {
         let h = 0.05;
         let mut sim = Sim::<2>::new([0.0, 0.0], [40, 30], h).unwrap();
@@ -71,6 +85,9 @@ fn sliding_blocks(contact: bool, rk_vc: bool) -> (Vector<2>, f64) {
             })
             .unwrap();
             sim.set_integration(Integration::Vc { order: 1 }).unwrap();
+        }
+        if mls {
+            sim.set_transfer(Transfer::Mls).unwrap();
         }
         let a = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
         let b = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());

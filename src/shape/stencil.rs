@@ -287,6 +287,18 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
 impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// Evaluates the factors of `shape` (whose width must be `W`) at every position.
     pub fn compute(&mut self, shape: &BSpline, grid: &Grid<D>, x: &[Vector<D>]) {
+        self.compute_with(shape, grid, x, true);
+    }
+
+    /// As [`TensorStencils::compute`]; without `derivatives` only the values are stored (the
+    /// MLS transfer without contact reads no gradient), and asking for a gradient later panics.
+    pub fn compute_with(
+        &mut self,
+        shape: &BSpline,
+        grid: &Grid<D>,
+        x: &[Vector<D>],
+        derivatives: bool,
+    ) {
         assert_eq!(shape.order.width(), W, "tensor stencil width");
         // The factored sums read a row of `W` nodes as contiguous storage.
         assert_eq!(
@@ -305,22 +317,36 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.first.resize(n, [0; D]);
         self.base.resize(n, 0);
         self.values.resize(n, [[0.0; W]; D]);
-        self.derivatives.resize(n, [[0.0; W]; D]);
-        self.first
+        let factors = self
+            .first
             .par_iter_mut()
             .zip(self.base.par_iter_mut())
             .zip(self.values.par_iter_mut())
-            .zip(self.derivatives.par_iter_mut())
-            .zip(x.par_iter())
-            .for_each(|((((first, base), w), dw), xp)| {
+            .zip(x.par_iter());
+        if derivatives {
+            self.derivatives.resize(n, [[0.0; W]; D]);
+            factors.zip(self.derivatives.par_iter_mut()).for_each(
+                |((((first, base), w), xp), dw)| {
+                    let f = shape.factors(grid, xp);
+                    *first = f.first;
+                    *base = grid.node_index(f.first);
+                    for a in 0..D {
+                        w[a].copy_from_slice(&f.values[a][..W]);
+                        dw[a].copy_from_slice(&f.derivatives[a][..W]);
+                    }
+                },
+            );
+        } else {
+            self.derivatives.clear();
+            factors.for_each(|(((first, base), w), xp)| {
                 let f = shape.factors(grid, xp);
                 *first = f.first;
                 *base = grid.node_index(f.first);
-                for a in 0..D {
-                    w[a].copy_from_slice(&f.values[a][..W]);
-                    dw[a].copy_from_slice(&f.derivatives[a][..W]);
+                for (w, values) in w.iter_mut().zip(&f.values) {
+                    w.copy_from_slice(&values[..W]);
                 }
             });
+        }
     }
 
     /// Integer index of the first stencil node of particle `p`.
@@ -413,7 +439,14 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         input: &ScatterInput<D>,
         out: &NodeScatter<D>,
     ) {
-        let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
+        let (base, w) = (self.base[p], &self.values[p]);
+        // The derivatives only for the force and the mass gradient (not stored under MLS).
+        let no_derivatives = [[0.0; W]; D];
+        let dw = if FORCE || (EXTRA && input.with_gradient) {
+            &self.derivatives[p]
+        } else {
+            &no_derivatives
+        };
         out.check_box(base, &self.strides, W);
         let first = &self.first[p];
         let xp = &input.position;
@@ -582,7 +615,13 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
         affine: bool,
         gradient: bool,
     ) -> Gathered<D> {
-        let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
+        let (base, w) = (self.base[p], &self.values[p]);
+        let no_derivatives = [[0.0; W]; D];
+        let dw = if gradient {
+            &self.derivatives[p]
+        } else {
+            &no_derivatives
+        };
         let first = &self.first[p];
         let offset = |a: usize, k: usize| {
             self.origin[a] + (first[a] + k as i64) as f64 * self.cell_size - xp[a]

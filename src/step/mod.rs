@@ -296,7 +296,14 @@ impl<const D: usize> Sim<D> {
         };
         let mut stencils = std::mem::take(storage(&mut self.work));
         let mut clock = std::time::Instant::now();
-        stencils.compute(&BSpline::new(order), &self.grid, &self.particles.position);
+        // MLS reads no shape-function gradient, except for the mass gradient of contact.
+        let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
+        stencils.compute_with(
+            &BSpline::new(order),
+            &self.grid,
+            &self.particles.position,
+            derivatives,
+        );
         self.work.times.shape += lap(&mut clock);
         // The particles' blocks from their stencils' first nodes.
         self.work
