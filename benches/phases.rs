@@ -97,6 +97,9 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     // Shape functions.
     let quadratic = BSpline::new(BSplineOrder::Quadratic);
     let mut factors = TensorStencils::<D, 3>::default();
+    // Computed once here too, so that a filtered run (`cargo bench --bench phases -- g2p`) that
+    // skips the shape and bins benchmarks still maps real stencils.
+    factors.compute(&quadratic, &grid, &ps.position);
     g.bench_function(BenchmarkId::new("shape", "bspline2 factors"), |b| {
         b.iter(|| factors.compute(&quadratic, &grid, &ps.position))
     });
@@ -113,6 +116,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
 
     // Binning, then the transfers with the quadratic B-spline.
     let mut bins = Bins::<D>::default();
+    bins.compute(&quadratic, &grid, &ps.position);
     g.bench_function("bins", |b| {
         b.iter(|| bins.compute(&quadratic, &grid, &ps.position))
     });
@@ -127,33 +131,47 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     g.bench_function(BenchmarkId::new("p2g", "bspline2 apic"), |b| {
         b.iter(|| p2g(&grid, &ps, &bins, &factors, forces, &mut nodes))
     });
+    // MLS: the force on the affine momentum, mass and momentum only.
+    let inverse_inertia = 4.0 / (grid.cell_size * grid.cell_size);
+    let mls_forces = Forces {
+        mls: Some((dt, inverse_inertia)),
+        ..forces
+    };
+    g.bench_function(BenchmarkId::new("p2g", "bspline2 mls"), |b| {
+        b.iter(|| p2g(&grid, &ps, &bins, &factors, mls_forces, &mut nodes))
+    });
     let walls = Walls::<D>::default();
     g.bench_function("grid_update", |b| {
         b.iter(|| grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0))
     });
-    let plan = TransferPlan {
-        flip: 0.0,
-        apic: true,
-        inverse_inertia: Some(4.0 / (grid.cell_size * grid.cell_size)),
-        mls: false,
-    };
+    // The node velocities the gathers read (also when the benchmarks above are filtered out).
+    p2g(&grid, &ps, &bins, &factors, forces, &mut nodes);
+    grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0);
     let (mut new, mut admissible) = (NewState::<D>::default(), Vec::new());
-    g.bench_function(BenchmarkId::new("g2p", "bspline2 apic"), |b| {
-        b.iter(|| {
-            grid_to_particle(
-                &grid,
-                &ps,
-                &factors,
-                Fields::One(&nodes),
-                &[None],
-                plan,
-                dt,
-                None::<&NoFinish>,
-                &mut new,
-                &mut admissible,
-            )
-        })
-    });
+    for (name, mls) in [("bspline2 apic", false), ("bspline2 mls", true)] {
+        let plan = TransferPlan {
+            flip: 0.0,
+            apic: true,
+            inverse_inertia: Some(inverse_inertia),
+            mls,
+        };
+        g.bench_function(BenchmarkId::new("g2p", name), |b| {
+            b.iter(|| {
+                grid_to_particle(
+                    &grid,
+                    &ps,
+                    &factors,
+                    Fields::One(&nodes),
+                    &[None],
+                    plan,
+                    dt,
+                    None::<&NoFinish>,
+                    &mut new,
+                    &mut admissible,
+                )
+            })
+        });
+    }
 
     // VC correction (order 1) with the quadratic B-spline, stencils stored node by node.
     let mut stored = Stencils::<D>::default();
