@@ -86,8 +86,10 @@ impl Constitutive for NeoHookean {
     fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
         let j = f.determinant();
         let b = f * f.transpose();
-        (b - Matrix3::identity()) * (self.0.mu / j)
-            + Matrix3::identity() * (self.0.lambda * j.ln() / j)
+        // As `stress_block` (one division), so that the two agree bit for bit.
+        let inverse_j = 1.0 / j;
+        (b - Matrix3::identity()) * (self.0.mu * inverse_j)
+            + Matrix3::identity() * (self.0.lambda * j.ln() * inverse_j)
     }
     fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
         let lnj = f.determinant().ln();
@@ -118,8 +120,10 @@ impl NeoHookean {
     #[inline(always)]
     pub fn stress_block<const D: usize>(&self, f: &Matrix<D>, j: f64) -> (Matrix<D>, f64) {
         let b = f * f.transpose();
-        let shear = self.0.mu / j;
-        let volumetric = self.0.lambda * j.ln() / j;
+        // One division (the hot loop of grid to particle waits on it).
+        let inverse_j = 1.0 / j;
+        let shear = self.0.mu * inverse_j;
+        let volumetric = self.0.lambda * j.ln() * inverse_j;
         let s = (b - Matrix::<D>::identity()) * shear + Matrix::<D>::identity() * volumetric;
         // In plane strain b_33 − 1 = 0, so σ_33 is the volumetric term alone.
         let out_of_plane = if D == 2 { volumetric } else { 0.0 };
