@@ -374,17 +374,28 @@ fn gather_all<const MLS: bool, const D: usize, F>(
         }
     };
     let writer = new.writer();
-    (0..ps.len())
-        .into_par_iter()
-        .map_init(PlasticState::default, |scratch, p| {
-            let mut u = ParticleUpdate::default();
-            gather(p, &mut u);
-            // SAFETY: every particle index is visited by one task only.
-            let ok = finish.is_none_or(|f| {
-                f.finish(p, &mut u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
-            });
-            unsafe { writer.store(p, &u) };
-            ok
-        })
-        .collect_into_vec(admissible);
+    // Particles in chunks: the gathers of a chunk, then its constitutive updates and stores.
+    // Each loop is short, so the processor overlaps consecutive particles' long dependency
+    // chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
+    const CHUNK: usize = 16;
+    admissible.clear();
+    admissible.resize(ps.len(), false);
+    admissible.par_chunks_mut(CHUNK).enumerate().for_each_init(
+        PlasticState::default,
+        |scratch, (c, ok)| {
+            let first = c * CHUNK;
+            let mut updates = [ParticleUpdate::<D>::default(); CHUNK];
+            for (k, u) in updates[..ok.len()].iter_mut().enumerate() {
+                gather(first + k, u);
+            }
+            for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
+                let p = first + k;
+                // SAFETY: every particle index is visited by one task only.
+                *ok = finish.is_none_or(|f| {
+                    f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
+                });
+                unsafe { writer.store(p, u) };
+            }
+        },
+    );
 }
