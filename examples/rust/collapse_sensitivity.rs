@@ -11,9 +11,9 @@
 //!   set used with the later rod experiments (ρ 2040, E 5.84 MPa, φ 21.9°).
 //! * `--floor MU`: floor friction coefficient (default tan φ).
 //! * `--young E`: Young's modulus (Pa; default that of the rods' set).
-//! * `--method bspline2|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1 (ã = 2),
-//!   with material-point integration or VC of order 1 (the surface found from the particles at
-//!   every step).
+//! * `--method bspline2|bspline2-mls|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1
+//!   (ã = 2), with material-point integration or VC of order 1 (the surface found from the
+//!   particles at every step); `bspline2-mls` is the quadratic B-spline with the MLS transfer.
 //! * `--rheology d,Δμ,I0`: the μ(I) rate dependence of the friction (grain diameter in m, the
 //!   friction gained at large inertial numbers, the reference inertial number); none by default.
 //! * `--thick k1,k2,..`: also the run-out of the part of the deposit thicker than `k` particle
@@ -77,8 +77,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "bspline2-vc" => (Shape::BSpline2, Integration::Vc { order: 1 }),
         "rk1" => (rk1, Integration::MaterialPoint),
         "rk1-vc" => (rk1, Integration::Vc { order: 1 }),
+        "bspline2-mls" => {
+            base.transfer = rkmpm::Transfer::Mls;
+            (Shape::BSpline2, Integration::MaterialPoint)
+        }
         other => {
-            return Err(format!("--method bspline2|bspline2-vc|rk1|rk1-vc, got {other}").into())
+            return Err(format!(
+                "--method bspline2|bspline2-mls|bspline2-vc|rk1|rk1-vc, got {other}"
+            )
+            .into())
         }
     };
     if let Some(r) = value("--rheology") {
