@@ -33,10 +33,10 @@ pub enum Transfer {
     /// rides on the affine momentum (one scatter of mass and momentum per node, no force sum)
     /// and the velocity gradient is the affine matrix `C_p`. Quadratic and cubic B-splines only
     /// (`M = h²/4`, `h²/3`), without VC (else the first step fails with `Unsupported`); the
-    /// transfer of Taichi's and Warp's MPM examples. Faster than APIC (1.1–1.2× per step) but
-    /// less accurate: the MLS gradient is exact for linear fields only, so on a smooth solution
-    /// it converges at about first order where APIC with the B-spline gradient reaches second
-    /// (`docs/convergence`).
+    /// transfer of Taichi's and Warp's MPM examples. Faster than APIC (about 1.15× per step in
+    /// 2D, 1.25× in 3D) but less accurate: the MLS gradient is exact for linear fields only, so
+    /// on a smooth solution it converges at about first order where APIC with the B-spline
+    /// gradient reaches second (`docs/convergence`).
     Mls,
 }
 
