@@ -323,28 +323,30 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             .zip(self.base.par_iter_mut())
             .zip(self.values.par_iter_mut())
             .zip(x.par_iter());
+        // First node, its storage index and the values; the factors for the derivatives.
+        let fill = |first: &mut [i64; D], base: &mut usize, w: &mut [[f64; W]; D], xp| {
+            let f = shape.factors(grid, xp);
+            *first = f.first;
+            *base = grid.node_index(f.first);
+            for (w, values) in w.iter_mut().zip(&f.values) {
+                w.copy_from_slice(&values[..W]);
+            }
+            f
+        };
         if derivatives {
             self.derivatives.resize(n, [[0.0; W]; D]);
             factors.zip(self.derivatives.par_iter_mut()).for_each(
                 |((((first, base), w), xp), dw)| {
-                    let f = shape.factors(grid, xp);
-                    *first = f.first;
-                    *base = grid.node_index(f.first);
-                    for a in 0..D {
-                        w[a].copy_from_slice(&f.values[a][..W]);
-                        dw[a].copy_from_slice(&f.derivatives[a][..W]);
+                    let f = fill(first, base, w, xp);
+                    for (dw, derivatives) in dw.iter_mut().zip(&f.derivatives) {
+                        dw.copy_from_slice(&derivatives[..W]);
                     }
                 },
             );
         } else {
             self.derivatives.clear();
             factors.for_each(|(((first, base), w), xp)| {
-                let f = shape.factors(grid, xp);
-                *first = f.first;
-                *base = grid.node_index(f.first);
-                for (w, values) in w.iter_mut().zip(&f.values) {
-                    w.copy_from_slice(&values[..W]);
-                }
+                fill(first, base, w, xp);
             });
         }
     }
@@ -419,9 +421,8 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     ///
     /// `AFFINE`: `input.affine` is given; `MASS`: the mass is mapped; `FORCE`: `input.force` is
     /// given; `EXTRA`: the body force (with `FORCE`) or the mass gradient may be asked for
-    /// (checked at run time). Nodes with a zero
-    /// value and gradient are skipped; for `W ≥ 3` (B-splines that are C¹) a zero value implies
-    /// a zero gradient, so the value alone decides.
+    /// (checked at run time). Nodes with a zero value and gradient are skipped; for `W ≥ 3`
+    /// (B-splines that are C¹) a zero value implies a zero gradient, so the value alone decides.
     ///
     /// # Safety
     /// As [`StencilView::scatter`].

@@ -350,10 +350,11 @@ fn gather_all<const MLS: bool, const D: usize, F>(
             apic_inertia,
             !MLS,
         );
-        let (v_pic, dv, b) = (g.velocity, g.velocity_change, g.affine);
-        // MLS: the velocity gradient is the affine matrix `C_p = B_p / D`.
-        let l = match plan.inverse_inertia {
-            Some(inv) if MLS => b * inv,
+        let (v_pic, dv) = (g.velocity, g.velocity_change);
+        // `C_p = B_p / D` when the inertia is constant; under MLS it is the velocity gradient.
+        let affine = plan.inverse_inertia.map(|inv| g.affine * inv);
+        let l = match affine {
+            Some(c) if MLS => c,
             _ => g.gradient,
         };
         u.position = xp + dt * v_pic;
@@ -363,10 +364,7 @@ fn gather_all<const MLS: bool, const D: usize, F>(
             v_pic
         };
         if plan.apic {
-            u.affine = match plan.inverse_inertia {
-                Some(inv) => b * inv,
-                None => l,
-            };
+            u.affine = affine.unwrap_or(l);
         }
         if update_deformation {
             u.deformation_gradient =
