@@ -1,7 +1,13 @@
 //! Material points, stored as a structure of arrays (one `Vec` per quantity).
+//!
+//! The step keeps the storage sorted by grid block ([`Particles::permute`]), so a particle's
+//! place in these arrays (its *slot*) changes; its *id*, the index it was added with, does
+//! not. What the API hands out is in id order: [`Particles::write_field`], the C API's arrays,
+//! the VTK files, the body-force callback's arrays and the particles named in error messages.
 
 use crate::material::PlasticState;
 use crate::{Matrix, Vector};
+use rayon::prelude::*;
 
 /// Per-particle quantities. All vectors have the same length (the particle count), except
 /// `affine`, which is empty unless the APIC transfer runs.
@@ -28,6 +34,31 @@ pub struct Particles<const D: usize> {
     /// History of elastoplastic materials (`F_e`, plastic strain); empty until particles of a
     /// history material are added, so elastic scenes carry none of it.
     pub plastic: Vec<PlasticState>,
+    /// The id of the particle in each slot: the index it was added with (`0, 1, …` over all
+    /// calls to `Sim::add_particles`).
+    pub id: Vec<u32>,
+}
+
+/// Buffers [`Particles::permute`] gathers into, one per element type.
+#[derive(Debug, Default, Clone)]
+pub struct SpareArrays<const D: usize> {
+    vectors: Vec<Vector<D>>,
+    matrices: Vec<Matrix<D>>,
+    scalars: Vec<f64>,
+    indices: Vec<u32>,
+    plastic: Vec<PlasticState>,
+}
+
+impl<const D: usize> SpareArrays<D> {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.vectors.capacity() * size_of::<Vector<D>>()
+            + self.matrices.capacity() * size_of::<Matrix<D>>()
+            + self.scalars.capacity() * 8
+            + self.indices.capacity() * 4
+            + self.plastic.capacity() * size_of::<PlasticState>()
+    }
 }
 
 /// A particle quantity that can be read out, with its layout.
@@ -124,7 +155,7 @@ impl<const D: usize> Particles<D> {
                 * m
             + (self.reference_volume.capacity() + self.mass.capacity() + self.pressure.capacity())
                 * 8
-            + self.material.capacity() * 4
+            + (self.material.capacity() + self.id.capacity()) * 4
             + self.plastic.capacity() * size_of::<PlasticState>()
     }
 
@@ -133,51 +164,76 @@ impl<const D: usize> Particles<D> {
         crate::determinant(&self.deformation_gradient[p]) * self.reference_volume[p]
     }
 
-    /// Writes `field` for every particle into `out`, particle-major
-    /// (`out[p * components + c]`). `out` must hold `len() * field.components(D)` values.
+    /// Writes `field` for every particle into `out` in id order, particle-major
+    /// (`out[id * components + c]`). `out` must hold `len() * field.components(D)` values.
     pub fn write_field(&self, field: Field, out: &mut [f64]) {
         let k = field.components(D);
         assert_eq!(out.len(), k * self.len(), "output length");
-        let vec = |v: &[Vector<D>], out: &mut [f64]| {
-            for (o, x) in out.chunks_exact_mut(D).zip(v) {
-                o.copy_from_slice(x.as_slice());
-            }
-        };
-        let mat = |m: &[Matrix<D>], out: &mut [f64]| {
-            for (o, x) in out.chunks_exact_mut(D * D).zip(m) {
-                // row-major: transpose of nalgebra's column-major storage
-                o.copy_from_slice(x.transpose().as_slice());
-            }
-        };
-        match field {
-            Field::Position => vec(&self.position, out),
-            Field::Velocity => vec(&self.velocity, out),
-            Field::ReferencePosition => vec(&self.reference_position, out),
+        let values = |p: usize, o: &mut [f64]| match field {
+            Field::Position => o.copy_from_slice(self.position[p].as_slice()),
+            Field::Velocity => o.copy_from_slice(self.velocity[p].as_slice()),
+            Field::ReferencePosition => o.copy_from_slice(self.reference_position[p].as_slice()),
             Field::Displacement => {
-                for (p, o) in out.chunks_exact_mut(D).enumerate() {
-                    o.copy_from_slice((self.position[p] - self.reference_position[p]).as_slice());
-                }
+                o.copy_from_slice((self.position[p] - self.reference_position[p]).as_slice())
             }
-            Field::Stress => mat(&self.stress, out),
-            Field::DeformationGradient => mat(&self.deformation_gradient, out),
-            Field::Pressure => out.copy_from_slice(&self.pressure),
-            Field::Mass => out.copy_from_slice(&self.mass),
-            Field::Volume => {
-                for (p, o) in out.iter_mut().enumerate() {
-                    *o = self.volume(p);
-                }
+            // Row-major: the transpose of nalgebra's column-major storage.
+            Field::Stress => o.copy_from_slice(self.stress[p].transpose().as_slice()),
+            Field::DeformationGradient => {
+                o.copy_from_slice(self.deformation_gradient[p].transpose().as_slice())
             }
-            Field::PlasticStrain => {
-                for (p, o) in out.iter_mut().enumerate() {
-                    *o = self.plastic.get(p).map_or(0.0, |s| s.plastic_strain);
-                }
-            }
-            Field::Damage => {
-                for (p, o) in out.iter_mut().enumerate() {
-                    *o = self.plastic.get(p).map_or(0.0, |s| s.damage);
-                }
-            }
+            Field::Pressure => o[0] = self.pressure[p],
+            Field::Mass => o[0] = self.mass[p],
+            Field::Volume => o[0] = self.volume(p),
+            Field::PlasticStrain => o[0] = self.plastic.get(p).map_or(0.0, |s| s.plastic_strain),
+            Field::Damage => o[0] = self.plastic.get(p).map_or(0.0, |s| s.damage),
+        };
+        for (p, &id) in self.id.iter().enumerate() {
+            let i = id as usize * k;
+            values(p, &mut out[i..i + k]);
         }
+    }
+
+    /// The slot of each id (the inverse of [`Particles::id`]): `slots()[id]` is where particle
+    /// `id` is stored.
+    pub fn slots(&self) -> Vec<usize> {
+        let mut slots = vec![0; self.len()];
+        for (p, &id) in self.id.iter().enumerate() {
+            slots[id as usize] = p;
+        }
+        slots
+    }
+
+    /// Whether every particle is in the slot of its id (nothing sorted yet).
+    pub fn in_id_order(&self) -> bool {
+        self.id.iter().enumerate().all(|(p, &id)| id as usize == p)
+    }
+
+    /// Stores the particles in the order `order` (a permutation of the slots): the particle in
+    /// slot `order[i]` goes to slot `i`, with all its quantities and its id. `spare` lends the
+    /// buffers (kept between calls, so a permutation allocates nothing once they have grown).
+    pub fn permute(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
+        assert_eq!(order.len(), self.len(), "a permutation of the particles");
+        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, spare: &mut Vec<T>, order: &[u32]) {
+            if v.is_empty() {
+                return;
+            }
+            spare.clear();
+            spare.par_extend(order.par_iter().map(|&p| v[p as usize]));
+            std::mem::swap(v, spare);
+        }
+        let s = spare;
+        gather(&mut self.position, &mut s.vectors, order);
+        gather(&mut self.reference_position, &mut s.vectors, order);
+        gather(&mut self.velocity, &mut s.vectors, order);
+        gather(&mut self.deformation_gradient, &mut s.matrices, order);
+        gather(&mut self.stress, &mut s.matrices, order);
+        gather(&mut self.affine, &mut s.matrices, order);
+        gather(&mut self.reference_volume, &mut s.scalars, order);
+        gather(&mut self.mass, &mut s.scalars, order);
+        gather(&mut self.pressure, &mut s.scalars, order);
+        gather(&mut self.material, &mut s.indices, order);
+        gather(&mut self.id, &mut s.indices, order);
+        gather(&mut self.plastic, &mut s.plastic, order);
     }
 
     /// Total linear momentum `Σ m_p v_p`.

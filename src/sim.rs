@@ -187,6 +187,7 @@ impl<const D: usize> Sim<D> {
                 + w.bins.bytes()
                 + bytes(&w.volumes)
                 + w.new_state.bytes()
+                + w.spare.bytes()
                 + bytes(&w.admissible),
             grid: w.nodes.bytes() + w.bodies.iter().map(|b| b.bytes()).sum::<usize>(),
             active_nodes: w.active_nodes,
@@ -200,6 +201,14 @@ impl<const D: usize> Sim<D> {
     #[doc(hidden)]
     pub fn set_stored_stencils(&mut self, stored: bool) {
         self.work.stored_stencils = stored;
+    }
+
+    /// Whether the steps keep the particles stored in the order of their grid blocks (on by
+    /// default; see [`Particles`]). Off, the storage stays in id order: the results are the
+    /// same physics (node sums taken in another order, so they differ by round-off once
+    /// particles have been sorted), and scenes whose particles mix run slower (BENCHMARKS.md).
+    pub fn set_particle_sorting(&mut self, on: bool) {
+        self.work.keep_order = !on;
     }
 
     /// Chooses the shape function. Before stepping only.
@@ -439,7 +448,16 @@ impl<const D: usize> Sim<D> {
             )));
         }
         let ps = &mut self.particles;
+        let first_id = ps.len();
+        if first_id + n > u32::MAX as usize {
+            return Err(Error::invalid(format!(
+                "{} particles would exceed the limit of {} per simulation",
+                first_id + n,
+                u32::MAX
+            )));
+        }
         let apic = self.options.transfer.is_affine();
+        ps.id.extend(first_id as u32..(first_id + n) as u32);
         ps.position.extend_from_slice(positions);
         ps.reference_position.extend_from_slice(positions);
         match velocities {
@@ -512,6 +530,9 @@ impl<const D: usize> Sim<D> {
     pub fn options(&self) -> &Options<D> {
         &self.options
     }
+    /// The particles, in storage order: sorted by grid block as the steps go
+    /// ([`Sim::set_particle_sorting`]); `Particles::id` gives each slot's id, and
+    /// [`Sim::field`] is in id order.
     pub fn particles(&self) -> &Particles<D> {
         &self.particles
     }
@@ -531,7 +552,8 @@ impl<const D: usize> Sim<D> {
             .sum()
     }
 
-    /// Values of `field` for every particle, particle-major.
+    /// Values of `field` for every particle, particle-major, in id order (the order they were
+    /// added).
     pub fn field(&self, field: Field) -> Vec<f64> {
         let mut out = vec![0.0; field.components(D) * self.particles.len()];
         self.particles.write_field(field, &mut out);

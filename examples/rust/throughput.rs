@@ -67,6 +67,8 @@ struct Args {
     material: String,
     padding: usize,
     memory: bool,
+    shuffle: bool,
+    sort: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -87,6 +89,8 @@ fn parse() -> Result<Args, String> {
         material: "neo-hookean".into(),
         padding: 0,
         memory: false,
+        shuffle: false,
+        sort: true,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -112,6 +116,8 @@ fn parse() -> Result<Args, String> {
             "--transfer" => a.transfer = Some(val()?),
             "--gravity" => a.gravity = true,
             "--memory" => a.memory = true,
+            "--shuffle" => a.shuffle = true,
+            "--no-sort" => a.sort = false,
             "--material" => a.material = val()?,
             "--padding" => a.padding = val()?.parse().map_err(|e| format!("--padding: {e}"))?,
             "-h" | "--help" => {
@@ -120,7 +126,7 @@ fn parse() -> Result<Args, String> {
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
-                     [--padding CELLS] [--memory]"
+                     [--padding CELLS] [--memory] [--shuffle] [--no-sort]"
                         .into(),
                 )
             }
@@ -225,9 +231,22 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         x.push(p);
         v.push(vel);
     }
+    if a.shuffle {
+        // Fisher–Yates with a fixed xorshift sequence: the same order in every run.
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        for i in (1..total).rev() {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let j = (state % (i as u64 + 1)) as usize;
+            x.swap(i, j);
+            v.swap(i, j);
+        }
+    }
     let vol = vec![(h / 2.0).powi(D as i32); total];
     sim.add_particles(mat, &x, &vol, Some(&v)).map_err(e)?;
     sim.set_stored_stencils(a.stored);
+    sim.set_particle_sorting(a.sort);
     drop((x, v, vol));
     for _ in 0..a.warmup {
         sim.step(dt).map_err(e)?;

@@ -7,7 +7,7 @@
 //! ```
 
 use rkmpm::scenes::{run_vibrating_bar, VibratingBar};
-use rkmpm::Sim;
+use rkmpm::{Field, Sim};
 use std::io::Write;
 use std::process::ExitCode;
 
@@ -23,13 +23,11 @@ fn run<const D: usize>(path: &str) -> Result<(), String> {
         100.0 * period_error
     );
     let mut out = std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| e.to_string())?);
-    let ps = sim.particles();
-    for p in 0..ps.len() {
-        let values: Vec<String> = ps.position[p]
-            .iter()
-            .chain(ps.velocity[p].iter())
-            .map(|v| format!("{v:.16e}"))
-            .collect();
+    // In id order, as the C and Fortran drivers read them (`Sim::field`); the engine's own
+    // storage is sorted by grid block.
+    let (x, v) = (sim.field(Field::Position), sim.field(Field::Velocity));
+    for (x, v) in x.chunks_exact(D).zip(v.chunks_exact(D)) {
+        let values: Vec<String> = x.iter().chain(v).map(|v| format!("{v:.16e}")).collect();
         writeln!(out, "{}", values.join(" ")).map_err(|e| e.to_string())?;
     }
     if period_error > 0.01 || r.velocity_error > 0.03 {

@@ -119,8 +119,9 @@ pub type RkmpmProgressFn = Option<
 >;
 
 /// Body force per unit mass, called once per step on the thread that calls `rkmpm_sim_step`, with
-/// the time at the start of the step and `count * dim` interleaved arrays. Write the accelerations
-/// of every particle into `accelerations` and return 0; any other return value makes the step
+/// the time at the start of the step and `count * dim` interleaved arrays, the particles in the
+/// order they were added (as `rkmpm_sim_get_particles` gives them, whatever order the engine
+/// stores them in). Write the accelerations of every particle into `accelerations` and return 0; any other return value makes the step
 /// fail with `RKMPM_ERR_CALLBACK` and leaves the simulation unchanged. The callback must not call
 /// any `rkmpm_sim_*` function on the simulation that is stepping.
 pub type RkmpmBodyForceFn = Option<
@@ -1089,7 +1090,10 @@ pub unsafe extern "C" fn rkmpm_sim_field_len(
     })
 }
 
-/// Copies `field` of every particle into `out` (particle-major, see `RkmpmField`). `len` is the
+/// Copies `field` of every particle into `out` (particle-major, see `RkmpmField`), the particles in
+/// the order they were added: particle `i` of the `k`-th call to `rkmpm_sim_add_particles` after
+/// those of the earlier calls. (The engine keeps its own storage sorted by grid block for
+/// speed; that order is never visible through the C API.) `len` is the
 /// capacity of `out` in values; when it is smaller than needed, returns
 /// `RKMPM_ERR_BUFFER_TOO_SMALL` and writes nothing.
 ///

@@ -5,13 +5,15 @@
 //! Layout (little-endian): the magic `RKMPMCHK`, the format version (`u32`), the dimension
 //! (`u32`), the payload length (`u64`), the payload, and the CRC-32 of the payload (`u32`). The
 //! payload holds the grid, the options, the materials (every stored field, derived constants
-//! included, so nothing is recomputed differently), the particles, the boundary points, the time
-//! and the step count. It does not hold the body-force callback (set it again after loading) or
+//! included, so nothing is recomputed differently), the particles in their storage order with
+//! their ids (the order fixes the order of the node sums), the boundary points, the time and the
+//! step count. It does not hold the body-force callback (set it again after loading) or
 //! any scratch space (every step rebuilds it).
 //!
 //! Files are written to a temporary name and renamed: an existing checkpoint is replaced only by
 //! a complete new one. A file that is truncated, has another magic, or fails its checksum is
-//! refused with `CorruptFile`; a newer format version with `Unsupported`.
+//! refused with `CorruptFile`; a newer format version with `Unsupported`. Files of version 1
+//! (without ids) still load.
 
 use crate::boundary::{Boundary, Walls};
 use crate::contact::Contact;
@@ -29,8 +31,9 @@ use nalgebra::Matrix3;
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"RKMPMCHK";
-/// Format version written by this build.
-pub const CHECKPOINT_VERSION: u32 = 1;
+/// Format version written by this build. Version 2 adds the particles' ids (their storage is
+/// sorted by grid block); version 1 files, written before, load with the particles in id order.
+pub const CHECKPOINT_VERSION: u32 = 2;
 
 fn corrupt(what: impl Into<String>) -> Error {
     Error::new(ErrorKind::CorruptFile, what)
@@ -381,7 +384,7 @@ fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> 
     Ok(())
 }
 
-fn write_particles<const D: usize>(w: &mut Writer, ps: &Particles<D>) {
+fn write_particles<const D: usize>(w: &mut Writer, ps: &Particles<D>, version: u32) {
     w.vectors(&ps.position);
     w.vectors(&ps.reference_position);
     w.vectors(&ps.velocity);
@@ -398,9 +401,13 @@ fn write_particles<const D: usize>(w: &mut Writer, ps: &Particles<D>) {
         w.f64s(s.elastic_deformation.iter());
         w.f64s(&[s.plastic_strain, s.damage, s.heating]);
     }
+    if version >= 2 {
+        w.len(ps.id.len());
+        ps.id.iter().for_each(|&i| w.u32(i));
+    }
 }
 
-fn read_particles<const D: usize>(r: &mut Reader) -> Result<Particles<D>> {
+fn read_particles<const D: usize>(r: &mut Reader, version: u32) -> Result<Particles<D>> {
     let mut ps = Particles::<D> {
         position: r.vectors()?,
         reference_position: r.vectors()?,
@@ -431,6 +438,22 @@ fn read_particles<const D: usize>(r: &mut Reader) -> Result<Particles<D>> {
         })
         .collect::<Result<_>>()?;
     let len = ps.position.len();
+    if version >= 2 {
+        let n = r.len(4)?;
+        ps.id = (0..n).map(|_| r.u32()).collect::<Result<_>>()?;
+        // A permutation of 0..len: every id once.
+        let mut seen = vec![false; len];
+        if n != len
+            || !ps
+                .id
+                .iter()
+                .all(|&i| (i as usize) < len && !std::mem::replace(&mut seen[i as usize], true))
+        {
+            return Err(corrupt("the particle ids are not a permutation"));
+        }
+    } else {
+        ps.id = (0..len as u32).collect();
+    }
     let same = [
         ps.reference_position.len(),
         ps.velocity.len(),
@@ -453,6 +476,11 @@ fn read_particles<const D: usize>(r: &mut Reader) -> Result<Particles<D>> {
 impl<const D: usize> Sim<D> {
     /// The checkpoint of this simulation as bytes (see the module documentation).
     pub fn checkpoint_bytes(&self) -> Vec<u8> {
+        self.encode(CHECKPOINT_VERSION)
+    }
+
+    /// The checkpoint in format `version` (1 or 2; tests write version 1 to read it back).
+    fn encode(&self, version: u32) -> Vec<u8> {
         let mut w = Writer::default();
         w.f64s(self.grid.origin.iter());
         self.grid.cells.iter().for_each(|&c| w.u64(c as u64));
@@ -462,7 +490,7 @@ impl<const D: usize> Sim<D> {
         self.materials
             .iter()
             .for_each(|m| write_material(&mut w, m));
-        write_particles(&mut w, &self.particles);
+        write_particles(&mut w, &self.particles, version);
         let b = &self.boundary;
         w.vectors(&b.position);
         w.vectors(&b.reference_area_normal);
@@ -474,7 +502,7 @@ impl<const D: usize> Sim<D> {
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
         out.extend_from_slice(MAGIC);
-        out.extend_from_slice(&CHECKPOINT_VERSION.to_le_bytes());
+        out.extend_from_slice(&version.to_le_bytes());
         out.extend_from_slice(&(D as u32).to_le_bytes());
         out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
         out.extend_from_slice(&payload);
@@ -490,7 +518,7 @@ impl<const D: usize> Sim<D> {
     /// Restores a simulation from checkpoint bytes. The body-force callback is not part of a
     /// checkpoint: set it again.
     pub fn from_checkpoint_bytes(bytes: &[u8]) -> Result<Self> {
-        let dim = checkpoint_dimension(bytes)?;
+        let (version, dim) = checkpoint_frame(bytes)?;
         if dim != D {
             return Err(Error::invalid(format!(
                 "the checkpoint is of a {dim}D simulation, not {D}D"
@@ -499,7 +527,7 @@ impl<const D: usize> Sim<D> {
         let payload = &bytes[24..bytes.len() - 4];
         // The frame is intact (checksum), so a value the engine refuses means a damaged or forged
         // file: every refusal below is `CorruptFile`.
-        Self::decode(payload).map_err(|e| match e.kind {
+        Self::decode(payload, version).map_err(|e| match e.kind {
             ErrorKind::CorruptFile => e,
             _ => corrupt(format!(
                 "the checkpoint holds a value the engine refuses: {}",
@@ -508,7 +536,7 @@ impl<const D: usize> Sim<D> {
         })
     }
 
-    fn decode(payload: &[u8]) -> Result<Self> {
+    fn decode(payload: &[u8], version: u32) -> Result<Self> {
         let mut r = Reader(payload);
         let mut origin = Vector::<D>::zeros();
         for c in origin.iter_mut() {
@@ -525,7 +553,7 @@ impl<const D: usize> Sim<D> {
         sim.materials = (0..n)
             .map(|_| read_material(&mut r))
             .collect::<Result<_>>()?;
-        let ps = read_particles::<D>(&mut r)?;
+        let ps = read_particles::<D>(&mut r, version)?;
         if let Some(p) = ps
             .material
             .iter()
@@ -602,6 +630,11 @@ impl<const D: usize> Sim<D> {
 
 /// Checks the frame (magic, version, length, checksum) and returns the dimension.
 pub fn checkpoint_dimension(bytes: &[u8]) -> Result<usize> {
+    checkpoint_frame(bytes).map(|(_, dim)| dim)
+}
+
+/// Checks the frame and returns the format version and the dimension.
+fn checkpoint_frame(bytes: &[u8]) -> Result<(u32, usize)> {
     if bytes.len() < 28 || &bytes[..8] != MAGIC {
         return Err(corrupt(
             "not an rkmpm checkpoint (wrong magic or too short)",
@@ -609,10 +642,12 @@ pub fn checkpoint_dimension(bytes: &[u8]) -> Result<usize> {
     }
     let word = |k: usize| u32::from_le_bytes(bytes[k..k + 4].try_into().expect("4 bytes"));
     let version = word(8);
-    if version != CHECKPOINT_VERSION {
+    if version == 0 || version > CHECKPOINT_VERSION {
         return Err(Error::new(
             ErrorKind::Unsupported,
-            format!("checkpoint format version {version}; this build reads {CHECKPOINT_VERSION}"),
+            format!(
+                "checkpoint format version {version}; this build reads 1 to {CHECKPOINT_VERSION}"
+            ),
         ));
     }
     let dim = word(12) as usize;
@@ -631,5 +666,60 @@ pub fn checkpoint_dimension(bytes: &[u8]) -> Result<usize> {
     if dim != 2 && dim != 3 {
         return Err(corrupt(format!("dimension {dim} in the checkpoint")));
     }
-    Ok(dim)
+    Ok((version, dim))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::Material;
+
+    /// A small block whose particles the first step sorts: added column by column, so their
+    /// order is not the grid blocks' row-major order.
+    fn block() -> Sim<2> {
+        let mut sim = Sim::<2>::new([0.0, 0.0], [64, 16], 1.0 / 16.0).unwrap();
+        let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+        let h = 1.0 / 32.0;
+        let x: Vec<Vector<2>> = (0..80)
+            .flat_map(|i| {
+                (0..12).map(move |j| Vector::<2>::new(0.4 + i as f64 * h, 0.1 + j as f64 * h))
+            })
+            .collect();
+        let v: Vec<Vector<2>> = x
+            .iter()
+            .map(|x| Vector::<2>::new(0.1 * x[1], -0.05))
+            .collect();
+        sim.add_particles(m, &x, &vec![h * h; x.len()], Some(&v))
+            .unwrap();
+        sim
+    }
+
+    #[test]
+    fn version_1_files_load_in_id_order() {
+        let sim = block();
+        assert!(sim.particles().in_id_order());
+        let bytes = sim.encode(1);
+        assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
+        let copy = Sim::<2>::from_checkpoint_bytes(&bytes).unwrap();
+        assert_eq!(copy.particles(), sim.particles());
+    }
+
+    #[test]
+    fn sorted_particles_keep_their_ids_and_order() {
+        let mut sim = block();
+        let dt = sim.stable_dt(0.3).unwrap();
+        sim.step(dt).unwrap();
+        // The step sorted them: the ids are a permutation, not the identity.
+        assert!(!sim.particles().in_id_order());
+        let copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert_eq!(copy.particles(), sim.particles());
+        // Ids that are not a permutation are refused.
+        sim.particles.id[1] = sim.particles.id[0];
+        let e = match Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()) {
+            Err(e) => e,
+            Ok(_) => panic!("ids that are not a permutation were accepted"),
+        };
+        assert_eq!(e.kind, ErrorKind::CorruptFile, "{e}");
+        assert!(e.message.contains("permutation"), "{e}");
+    }
 }

@@ -31,6 +31,10 @@ const MIN_BLOCK: usize = 4;
 /// 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
 const LONG_BLOCK: usize = 128;
 
+/// Average run of consecutive particle slots in block order below which the particles are
+/// stored anew in that order (`Bins::is_scattered`).
+const SORTED_RUN: usize = 512;
+
 /// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
 #[derive(Debug, Clone)]
 pub struct Bins<const D: usize> {
@@ -185,6 +189,15 @@ impl<const D: usize> Bins<D> {
                 .filter(|(_, &m)| m)
                 .map(|(k, _)| k as u32),
         );
+    }
+
+    /// Whether the particles' storage is scattered over their blocks: when the runs of
+    /// consecutive slots in `order` are shorter than `SORTED_RUN` on average, the step stores
+    /// the particles in `order` ([`crate::particles::Particles::permute`]), after which `order`
+    /// is one run per block's worth of particles until they move to other blocks.
+    pub fn is_scattered(&self) -> bool {
+        let breaks = self.order.windows(2).filter(|w| w[1] != w[0] + 1).count();
+        breaks * SORTED_RUN > self.order.len()
     }
 
     /// Bytes allocated per particle (keys and order) and per block (counts and marks).

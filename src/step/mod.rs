@@ -61,6 +61,10 @@ pub struct Workspace<const D: usize> {
     pub cubic: TensorStencils<D, 4>,
     /// Use stored stencils for B-splines too (tests and benchmarks compare the two).
     pub stored_stencils: bool,
+    /// Particles left in id order (`Sim::set_particle_sorting(false)`).
+    pub keep_order: bool,
+    /// Buffers of the particles' sort.
+    pub spare: crate::particles::SpareArrays<D>,
     /// Time per phase, summed over the steps.
     pub times: PhaseTimes,
     /// Nodes written by the last step.
@@ -338,17 +342,31 @@ impl<const D: usize> Sim<D> {
         // 2. Body forces.
         let body = match self.body_force.as_mut() {
             Some(bf) => {
-                work.body_acceleration.clear();
-                work.body_acceleration.resize(ps.len(), Vector::zeros());
-                bf.accelerations(
-                    self.time,
-                    &ps.reference_position,
-                    &ps.position,
-                    &mut work.body_acceleration,
-                )
-                .map_err(|m| Error::new(ErrorKind::Callback, format!("body force failed: {m}")))?;
-                if let Some(p) = work
-                    .body_acceleration
+                // The callback sees the particles in id order.
+                let sorted = !ps.in_id_order();
+                let by_id = |v: &[Vector<D>]| -> Vec<Vector<D>> {
+                    let mut out = vec![Vector::zeros(); v.len()];
+                    for (x, &id) in v.iter().zip(&ps.id) {
+                        out[id as usize] = *x;
+                    }
+                    out
+                };
+                let mut accelerations = vec![Vector::zeros(); ps.len()];
+                let result = if sorted {
+                    let (reference, current) = (by_id(&ps.reference_position), by_id(&ps.position));
+                    bf.accelerations(self.time, &reference, &current, &mut accelerations)
+                } else {
+                    bf.accelerations(
+                        self.time,
+                        &ps.reference_position,
+                        &ps.position,
+                        &mut accelerations,
+                    )
+                };
+                result.map_err(|m| {
+                    Error::new(ErrorKind::Callback, format!("body force failed: {m}"))
+                })?;
+                if let Some(p) = accelerations
                     .iter()
                     .position(|a| a.iter().any(|c| !c.is_finite()))
                 {
@@ -356,6 +374,13 @@ impl<const D: usize> Sim<D> {
                         ErrorKind::Callback,
                         format!("body force returned a non-finite value for particle {p}"),
                     ));
+                }
+                work.body_acceleration.clear();
+                if sorted {
+                    work.body_acceleration
+                        .extend(ps.id.iter().map(|&id| accelerations[id as usize]));
+                } else {
+                    work.body_acceleration = accelerations;
                 }
                 Some(work.body_acceleration.as_slice())
             }
@@ -640,13 +665,19 @@ impl<const D: usize> Sim<D> {
             work.times.constitutive += lap(&mut clock);
         }
 
-        // Checks: the first bad particle (lowest index) is reported.
-        let bad = admissible.iter().position(|ok| !ok);
+        // Checks: the first bad particle (lowest id) is reported.
+        let bad = admissible
+            .iter()
+            .enumerate()
+            .filter(|(_, ok)| !**ok)
+            .min_by_key(|&(p, _)| ps.id[p])
+            .map(|(p, _)| p);
         work.admissible = admissible;
         if let Some(p) = bad {
             let (kind, what) = new.get(p).check(grid).unwrap_err();
+            let id = ps.id[p];
             let message = format!(
-                "step {} (t = {:e}, dt = {dt:e}) rejected: particle {p} {what}; the simulation keeps its last good state",
+                "step {} (t = {:e}, dt = {dt:e}) rejected: particle {id} {what}; the simulation keeps its last good state",
                 self.steps + 1,
                 self.time
             );
@@ -714,6 +745,11 @@ impl<const D: usize> Sim<D> {
             .zip(&new.plastic)
             .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
             .for_each(|((state, _), new)| *state = *new);
+        // Particles stored in the order of their blocks, when they have scattered.
+        if !self.work.keep_order && self.work.bins.is_scattered() {
+            self.particles
+                .permute(&self.work.bins.order, &mut self.work.spare);
+        }
         let b = &mut self.boundary;
         for (k, u) in self.work.boundary_updates.iter().enumerate() {
             b.position[k] = u.position;

@@ -4,7 +4,7 @@
 use crate::boundary::{Boundary, Side};
 use crate::error::ErrorKind;
 use crate::material::Material;
-use crate::particles::Particles;
+use crate::particles::{Field, Particles};
 use crate::scenes::{run_vibrating_bar, VibratingBar};
 use crate::shape::Shape;
 use crate::sim::{Scheme, Sim, Transfer};
@@ -228,8 +228,10 @@ fn mls_velocity_gradient_is_exact_for_an_affine_field() {
         let f = Matrix::<D>::identity() + dt * a;
         // Round-off of sums of O(1) terms; a first-order error would be O(h) = 0.1 here.
         let tol = 1e-12;
-        for (p, x) in x.iter().enumerate() {
-            // The field at the particle's position at the start of the step (its stencil's).
+        for (p, &id) in ps.id.iter().enumerate() {
+            // The field at the particle's position at the start of the step (its stencil's);
+            // `x` is in id order (no step had sorted the particles).
+            let x = &x[id as usize];
             let v = a * x + c;
             assert!((ps.velocity[p] - v).norm() < tol, "{shape:?} v at {p}");
             assert!(
@@ -822,14 +824,18 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
 }
 
 /// A 3D scene of 10 million particles must fit in 16 GiB (issue 7): with the quadratic B-spline
-/// and APIC, particles and the step's per-particle storage stay under 1000 B per particle (869
-/// measured), which leaves 6 GiB of 16 for the grid; 10^7 particles ran at 8.9 GB peak RSS
-/// (`BENCHMARKS.md`).
+/// and APIC, particles and the step's per-particle storage stay under 1000 B per particle (885
+/// measured with the sort's spare buffers at 10^6), which leaves 6 GiB of 16 for the grid;
+/// 10^7 particles ran at 8.9 GB peak RSS (`BENCHMARKS.md`).
 #[test]
 fn memory_per_particle_allows_ten_million_particles_in_16_gib() {
     let mut sim = block::<3>(Shape::BSpline2, Transfer::Apic);
     let dt = sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
+    // As after a sort by block (the block here is in block order already): the spare buffers
+    // count too.
+    let reversed: Vec<u32> = (0..sim.particles.len() as u32).rev().collect();
+    sim.particles.permute(&reversed, &mut sim.work.spare);
     let m = sim.memory();
     assert_eq!(m.particle_count, 512);
     assert!(m.bytes_per_particle() < 1000.0, "{m:?}");
@@ -889,4 +895,68 @@ fn vc_body_against_the_domain_edge_steps() {
         .filter(|p| p.iter().any(|&c| c == 0.0))
         .count();
     assert_eq!(on_edge, 3 * n * n);
+}
+
+/// The steps store the particles in the order of their grid blocks once they are scattered over
+/// them (here from the start: added column by column, across the blocks' rows). That changes the
+/// order of the node sums, so the results agree with unsorted storage to round-off, and nothing
+/// the API hands out changes order: `Sim::field` and the body-force callback's arrays are in id
+/// order (the callback below checks its reference positions against the added ones and pushes
+/// the two halves of the block apart by them, so a slip in the map back would show at once).
+#[test]
+fn sorting_the_particles_changes_only_round_off() {
+    let q = 1.0 / 64.0;
+    let added: Vec<Vector<2>> = (0..32)
+        .flat_map(|i| {
+            (0..32).map(move |j| {
+                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
+            })
+        })
+        .collect();
+    let run = |sort: bool| {
+        let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
+        sim.set_particle_sorting(sort);
+        let m = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
+        let v: Vec<Vector<2>> = added
+            .iter()
+            .map(|x| Vector::<2>::new(-(x[1] - 0.5), x[0] - 0.5))
+            .collect();
+        sim.add_particles(m, &added, &vec![q * q; added.len()], Some(&v))
+            .unwrap();
+        let expected = added.clone();
+        sim.set_body_force(Some(Box::new(
+            move |_t: f64, x0: &[Vector<2>], _x: &[Vector<2>], a: &mut [Vector<2>]| {
+                if x0 != &expected[..] {
+                    return Err("reference positions out of id order".into());
+                }
+                for (a, x0) in a.iter_mut().zip(x0) {
+                    *a = Vector::<2>::new(if x0[0] < 0.5 { -5.0 } else { 5.0 }, 0.0);
+                }
+                Ok(())
+            },
+        )));
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..20 {
+            sim.step(dt).unwrap();
+        }
+        sim
+    };
+    let (sorted, unsorted) = (run(true), run(false));
+    assert!(unsorted.particles().in_id_order());
+    assert!(
+        !sorted.particles().in_id_order(),
+        "the particles were not sorted"
+    );
+    assert!(!sorted.work.bins.is_scattered());
+    // Round-off of sums of a few dozen O(1) terms per node, over 20 steps.
+    for field in [Field::Position, Field::Velocity, Field::Stress] {
+        let (a, b) = (sorted.field(field), unsorted.field(field));
+        let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+        let worst = a
+            .iter()
+            .zip(&b)
+            .fold(0.0f64, |s, (x, y)| s.max((x - y).abs()));
+        eprintln!("{field:?}: sorted against unsorted {worst:e} of {scale:e}");
+        assert!(worst <= 1e-12 * scale, "{field:?}: {worst:e} of {scale:e}");
+    }
 }
