@@ -368,6 +368,9 @@ impl<const D: usize> Sim<D> {
         match self.materials.get_mut(material as usize) {
             Some(Material::DruckerPrager(soil)) => {
                 soil.rheology = rheology;
+                // (The wave speed does not depend on the rheology; any change of a material
+                // drops the last step's signal speed all the same.)
+                self.work.signal_speed = None;
                 Ok(())
             }
             Some(_) => Err(Error::invalid(format!(
@@ -458,6 +461,7 @@ impl<const D: usize> Sim<D> {
         }
         let apic = self.options.transfer.is_affine();
         ps.id.extend(first_id as u32..(first_id + n) as u32);
+        self.work.signal_speed = None;
         ps.position.extend_from_slice(positions);
         ps.reference_position.extend_from_slice(positions);
         match velocities {
@@ -494,21 +498,31 @@ impl<const D: usize> Sim<D> {
     }
 
     /// `h / max_p(c_p + |v_p|)`, the step above which explicit MPM is unstable.
+    /// `max_p (c_p + |v_p|)` over the particles, taken afresh. A step computes the same value
+    /// from the new state while it has it in registers (`ConstitutiveUpdate`), so that the
+    /// next step's check does not read every particle again.
+    pub(crate) fn signal_speed(&self) -> f64 {
+        let (ps, materials) = (&self.particles, &self.materials);
+        // In parallel: the maximum is exact, so any thread count gives the same value.
+        (0..ps.len())
+            .into_par_iter()
+            .map(|p| {
+                let j = crate::determinant(&ps.deformation_gradient[p]);
+                materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
+            })
+            .reduce(|| 0.0, f64::max)
+    }
+
     pub(crate) fn critical_dt(&self) -> Result<f64> {
         if self.particles.is_empty() {
             return Err(Error::state(
                 "no particles: the stable time step is undefined",
             ));
         }
-        let (ps, materials) = (&self.particles, &self.materials);
-        // In parallel: the maximum is exact, so any thread count gives the same value.
-        let speed = (0..ps.len())
-            .into_par_iter()
-            .map(|p| {
-                let j = crate::determinant(&ps.deformation_gradient[p]);
-                materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
-            })
-            .reduce(|| 0.0, f64::max);
+        let speed = self
+            .work
+            .signal_speed
+            .unwrap_or_else(|| self.signal_speed());
         if !(speed > 0.0 && speed.is_finite()) {
             return Err(Error::state(format!(
                 "the largest signal speed max(c + |v|) over the particles is {speed:e}: no \

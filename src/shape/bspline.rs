@@ -126,7 +126,7 @@ impl BSpline {
 
 impl BSpline {
     /// The 1D factors of the stencil of `x` (inside the domain of `grid`).
-    #[inline]
+    #[inline(always)]
     pub fn factors<const D: usize>(&self, grid: &Grid<D>, x: &Vector<D>) -> Factors<D> {
         let width = self.order.width();
         let xi = grid.to_cell_units(x);

@@ -245,15 +245,22 @@ pub fn mls_velocity_gradient<const D: usize>(
 /// the checks under USL), and says whether it is admissible; `history` is the particle's new
 /// history slot, or scratch for particles without one.
 pub trait Finish<const D: usize>: Sync {
-    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState) -> bool;
+    /// `None` when the new state is not admissible; otherwise the particle's signal speed
+    /// `c + |v|` in it, of which the next step's stability check takes the maximum.
+    fn finish(
+        &self,
+        p: usize,
+        u: &mut ParticleUpdate<D>,
+        history: &mut PlasticState,
+    ) -> Option<f64>;
 }
 
 /// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
 pub struct NoFinish;
 
 impl<const D: usize> Finish<D> for NoFinish {
-    fn finish(&self, _: usize, _: &mut ParticleUpdate<D>, _: &mut PlasticState) -> bool {
-        true
+    fn finish(&self, _: usize, _: &mut ParticleUpdate<D>, _: &mut PlasticState) -> Option<f64> {
+        Some(0.0)
     }
 }
 
@@ -284,6 +291,7 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// registers (the constitutive update and the checks under USL; `history` is its new history
 /// slot, or scratch for particles without one) and says whether it is admissible; `admissible`
 /// receives that (true for every particle without `finish`). The new states go to `new`.
+/// Returns the largest signal speed `finish` gave (0 without `finish`).
 #[allow(clippy::too_many_arguments)]
 pub fn grid_to_particle<const D: usize, F>(
     grid: &Grid<D>,
@@ -296,7 +304,8 @@ pub fn grid_to_particle<const D: usize, F>(
     finish: Option<&F>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
-) where
+) -> f64
+where
     F: Finish<D>,
 {
     // One compiled pass per case: MLS takes no gradient sum.
@@ -324,7 +333,8 @@ fn gather_all<const MLS: bool, const D: usize, F>(
     finish: Option<&F>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
-) where
+) -> f64
+where
     F: Finish<D>,
 {
     new.prepare(ps, plan.apic);
@@ -378,22 +388,27 @@ fn gather_all<const MLS: bool, const D: usize, F>(
     const CHUNK: usize = 16;
     admissible.clear();
     admissible.resize(ps.len(), false);
-    admissible.par_chunks_mut(CHUNK).enumerate().for_each_init(
-        PlasticState::default,
-        |scratch, (c, ok)| {
+    admissible
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map_init(PlasticState::default, |scratch, (c, ok)| {
             let first = c * CHUNK;
             let mut updates = [ParticleUpdate::<D>::default(); CHUNK];
             for (k, u) in updates[..ok.len()].iter_mut().enumerate() {
                 gather(first + k, u);
             }
+            let mut speed = 0.0f64;
             for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
                 let p = first + k;
                 // SAFETY: every particle index is visited by one task only.
-                *ok = finish.is_none_or(|f| {
+                let finished = finish.map_or(Some(0.0), |f| {
                     f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
                 });
+                *ok = finished.is_some();
+                speed = speed.max(finished.unwrap_or(0.0));
                 unsafe { writer.store(p, u) };
             }
-        },
-    );
+            speed
+        })
+        .reduce(|| 0.0, f64::max)
 }

@@ -65,6 +65,11 @@ pub struct Workspace<const D: usize> {
     pub keep_order: bool,
     /// Buffers of the particles' sort.
     pub spare: crate::particles::SpareArrays<D>,
+    /// `max_p (c_p + |v_p|)` of the particles as they are, when the last step computed it with
+    /// their new state (`None` after anything else changed them: `Sim::signal_speed` then takes
+    /// it afresh); and the value of the step being taken, which its commit makes current.
+    pub signal_speed: Option<f64>,
+    pub new_signal_speed: f64,
     /// Time per phase, summed over the steps.
     pub times: PhaseTimes,
     /// Nodes written by the last step.
@@ -568,7 +573,7 @@ impl<const D: usize> Sim<D> {
         } else {
             Fields::One(&work.nodes)
         };
-        grid_to_particle(
+        let mut speed = grid_to_particle(
             grid,
             ps,
             stencils,
@@ -650,18 +655,23 @@ impl<const D: usize> Sim<D> {
         work.times.grid_to_particle += lap(&mut clock);
         if !usl {
             let writer = new.writer();
-            (0..ps.len())
-                .into_par_iter()
-                .map_init(PlasticState::default, |scratch, p| {
+            admissible.clear();
+            admissible.resize(ps.len(), false);
+            speed = admissible
+                .par_iter_mut()
+                .enumerate()
+                .map_init(PlasticState::default, |scratch, (p, ok)| {
                     // SAFETY: every particle index is visited by one task only.
                     unsafe {
                         let mut u = writer.get(p);
-                        let ok = finish.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
+                        let finished =
+                            finish.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
                         writer.store(p, &u);
-                        ok
+                        *ok = finished.is_some();
+                        finished.unwrap_or(0.0)
                     }
                 })
-                .collect_into_vec(&mut admissible);
+                .reduce(|| 0.0, f64::max);
             work.times.constitutive += lap(&mut clock);
         }
 
@@ -718,6 +728,7 @@ impl<const D: usize> Sim<D> {
         }
         work.boundary_updates = boundary_updates;
         work.new_state = new;
+        work.new_signal_speed = speed;
         if found && contact.is_some() {
             self.surface = body_surfaces;
         }
@@ -745,6 +756,7 @@ impl<const D: usize> Sim<D> {
             .zip(&new.plastic)
             .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
             .for_each(|((state, _), new)| *state = *new);
+        self.work.signal_speed = Some(self.work.new_signal_speed);
         // Particles stored in the order of their blocks, when they have scattered.
         if !self.work.keep_order && self.work.bins.is_scattered() {
             self.particles
@@ -774,13 +786,18 @@ struct ConstitutiveUpdate<'a, const D: usize> {
 impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
     // Always inlined into the gather, which keeps the new state in registers.
     #[inline(always)]
-    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut PlasticState) -> bool {
+    fn finish(
+        &self,
+        p: usize,
+        u: &mut ParticleUpdate<D>,
+        history: &mut PlasticState,
+    ) -> Option<f64> {
         let j = crate::determinant(&u.deformation_gradient);
         if j.is_nan() || j <= 0.0 {
             // Inverted or not finite: the checks reject the step; no stress to compute.
             u.stress = Matrix::zeros();
             u.pressure = 0.0;
-            return false;
+            return None;
         }
         let ps = self.particles;
         let material = &self.materials[ps.material[p] as usize];
@@ -798,7 +815,9 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
         if self.any_wall {
             self.walls.clamp_to_walls(self.grid, &mut u.position);
         }
+        // The signal speed as `Sim::signal_speed` takes it from the committed state.
         u.is_admissible(self.grid, j)
+            .then(|| material.wave_speed(j) + u.velocity.norm())
     }
 }
 
