@@ -163,6 +163,9 @@ pub struct GridNodes<const D: usize> {
     /// still apply the body force exactly; empty unless that limit is on (signed shape functions
     /// and VC integration).
     pub body_force: Vec<Vector<D>>,
+    /// Nodes a scatter marked. The factored B-spline scatter marks none when it maps mass
+    /// (nonnegative weights: a node it reaches gets mass), so `collect_touched` also takes a
+    /// node with mass as touched.
     touched: Vec<bool>,
     /// Position of each touched node in `active` (valid only for touched nodes).
     slot: Vec<u32>,
@@ -271,11 +274,13 @@ impl<const D: usize> GridNodes<D> {
         self.slot[n] as usize
     }
 
-    /// Lists node `n` in `active` if a parallel scatter ([`NodeScatter`]) marked it touched and it
-    /// is not listed yet (`slot` and `active` point at each other exactly for listed nodes).
+    /// Lists node `n` in `active` if a parallel scatter ([`NodeScatter`]) marked it touched or
+    /// gave it mass, and it is not listed yet (`slot` and `active` point at each other exactly
+    /// for listed nodes).
     #[inline]
     pub fn collect_touched(&mut self, n: usize) {
-        if self.touched[n] {
+        if self.touched[n] || self.mass[n] != 0.0 {
+            self.touched[n] = true;
             let s = self.slot[n] as usize;
             if s >= self.active.len() || self.active[s] != n {
                 self.slot[n] = self.active.len() as u32;

@@ -509,7 +509,11 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                 if value == 0.0 && (W >= 3 || gradient == Vector::<D>::zeros()) {
                     continue;
                 }
-                out.touch_unchecked(n);
+                if !MASS {
+                    // A node that gets mass needs no mark: `GridNodes::collect_touched` lists
+                    // the nodes with mass too.
+                    out.touch_unchecked(n);
+                }
                 scatter_add(out.momentum, n, value * (momentum_row + affine0[k0]));
                 if MASS {
                     scatter_add(out.mass, n, m * value);
