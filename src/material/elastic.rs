@@ -77,8 +77,7 @@ impl Constitutive for NeoHookean {
     }
     /// From the tangent at `F = J^{1/3} I`: `ρ c² = (λ + 2μ − 2λ ln J) / J` with `ρ = ρ0 / J`.
     fn wave_speed(&self, j: f64) -> f64 {
-        let c2 = (self.0.lambda + 2.0 * self.0.mu - 2.0 * self.0.lambda * j.ln()) / self.0.density;
-        c2.max(self.0.mu / self.0.density).sqrt()
+        self.wave_speed_from_log(j.ln())
     }
     fn is_elastic(&self) -> bool {
         true
@@ -114,16 +113,36 @@ impl LinearElastic {
 }
 
 impl NeoHookean {
+    /// The P-wave speed `sqrt((λ + 2μ − 2λ ln J) / ρ)` (at least the shear wave speed) given
+    /// `ln_j = ln J`: [`Constitutive::wave_speed`].
+    #[inline(always)]
+    pub fn wave_speed_from_log(&self, ln_j: f64) -> f64 {
+        let c2 = (self.0.lambda + 2.0 * self.0.mu - 2.0 * self.0.lambda * ln_j) / self.0.density;
+        c2.max(self.0.mu / self.0.density).sqrt()
+    }
+
     /// The `D×D` block of the Cauchy stress and the pressure for a `D×D` deformation gradient
     /// with `j = det f > 0` (plane strain in 2D), without the 3×3 embedding: the same values as
     /// [`Constitutive::cauchy_stress`].
     #[inline(always)]
     pub fn stress_block<const D: usize>(&self, f: &Matrix<D>, j: f64) -> (Matrix<D>, f64) {
+        self.stress_block_with_log(f, j, j.ln())
+    }
+
+    /// [`NeoHookean::stress_block`] given `ln_j = ln j` (the step takes the logarithm once for
+    /// the stress and the wave speed).
+    #[inline(always)]
+    pub fn stress_block_with_log<const D: usize>(
+        &self,
+        f: &Matrix<D>,
+        j: f64,
+        ln_j: f64,
+    ) -> (Matrix<D>, f64) {
         let b = f * f.transpose();
         // One division (the hot loop of grid to particle waits on it).
         let inverse_j = 1.0 / j;
         let shear = self.0.mu * inverse_j;
-        let volumetric = self.0.lambda * j.ln() * inverse_j;
+        let volumetric = self.0.lambda * ln_j * inverse_j;
         let s = (b - Matrix::<D>::identity()) * shear + Matrix::<D>::identity() * volumetric;
         // In plane strain b_33 − 1 = 0, so σ_33 is the volumetric term alone.
         let out_of_plane = if D == 2 { volumetric } else { 0.0 };

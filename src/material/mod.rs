@@ -261,6 +261,26 @@ impl Material {
             }
         }
     }
+
+    /// [`Material::elastic_stress`] and the wave speed at `j` ([`Constitutive::wave_speed`]),
+    /// with one logarithm for neo-Hookean.
+    #[inline(always)]
+    pub fn elastic_stress_and_wave_speed<const D: usize>(
+        &self,
+        f: &crate::Matrix<D>,
+        j: f64,
+    ) -> ((crate::Matrix<D>, f64), f64) {
+        match self {
+            Material::NeoHookean(m) => {
+                let ln_j = j.ln();
+                (
+                    m.stress_block_with_log(f, j, ln_j),
+                    m.wave_speed_from_log(ln_j),
+                )
+            }
+            m => (m.elastic_stress(f, j), m.wave_speed(j)),
+        }
+    }
 }
 
 /// Embeds a `D×D` deformation gradient in 3×3 (plane strain in 2D).

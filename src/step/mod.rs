@@ -801,8 +801,11 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
         }
         let ps = self.particles;
         let material = &self.materials[ps.material[p] as usize];
+        let mut wave_speed = None;
         (u.stress, u.pressure) = if material.is_elastic() {
-            material.elastic_stress(&u.deformation_gradient, j)
+            let (stress, c) = material.elastic_stress_and_wave_speed(&u.deformation_gradient, j);
+            wave_speed = Some(c);
+            stress
         } else {
             let f = embed3(&u.deformation_gradient);
             let f_old = embed3(&ps.deformation_gradient[p]);
@@ -817,7 +820,7 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
         }
         // The signal speed as `Sim::signal_speed` takes it from the committed state.
         u.is_admissible(self.grid, j)
-            .then(|| material.wave_speed(j) + u.velocity.norm())
+            .then(|| wave_speed.unwrap_or_else(|| material.wave_speed(j)) + u.velocity.norm())
     }
 }
 
