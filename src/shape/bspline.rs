@@ -128,49 +128,84 @@ impl BSpline {
     /// The 1D factors of the stencil of `x` (inside the domain of `grid`).
     #[inline(always)]
     pub fn factors<const D: usize>(&self, grid: &Grid<D>, x: &Vector<D>) -> Factors<D> {
-        let width = self.order.width();
-        let xi = grid.to_cell_units(x);
-        let inv_h = 1.0 / grid.cell_size;
         let mut f = Factors {
             first: [0; D],
             values: [[0.0; 4]; D],
             derivatives: [[0.0; 4]; D],
         };
+        let width = self.order.width();
+        let xi = grid.to_cell_units(x);
+        let inv_h = 1.0 / grid.cell_size;
         for a in 0..D {
-            let first = self.order.first_node(xi[a]);
-            f.first[a] = first;
-            // Distance from the first node in cells; the kernel at `t − k` in closed form (the
-            // branches of `BSplineOrder::kernel` are known from the range of `t`).
-            let t = xi[a] - first as f64;
-            let (w, dw) = (&mut f.values[a], &mut f.derivatives[a]);
-            match self.order {
-                BSplineOrder::Linear => {
-                    // The two nodes of the cell, with the cell's one-sided gradient also on a
-                    // node. t ∈ [0, 1].
-                    (w[0], w[1]) = (1.0 - t, t);
-                    (dw[0], dw[1]) = (-1.0, 1.0);
-                }
-                BSplineOrder::Quadratic => {
-                    // t ∈ [0.5, 1.5).
-                    let (u, c, l) = (1.5 - t, t - 1.0, t - 0.5);
-                    (w[0], w[1], w[2]) = (0.5 * u * u, 0.75 - c * c, 0.5 * l * l);
-                    (dw[0], dw[1], dw[2]) = (-u, -2.0 * c, l);
-                }
-                BSplineOrder::Cubic => {
-                    // t ∈ [1, 2): distances t, t − 1, 2 − t (mirrored) and 3 − t from the nodes.
-                    let (u, r1, r2, l) = (2.0 - t, t - 1.0, 2.0 - t, t - 1.0);
-                    let inner =
-                        |r: f64| (0.5 * r * r * r - r * r + 2.0 / 3.0, 1.5 * r * r - 2.0 * r);
-                    let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
-                    (w[0], w[1], w[2], w[3]) = (u * u * u / 6.0, w1, w2, l * l * l / 6.0);
-                    (dw[0], dw[1], dw[2], dw[3]) = (-0.5 * u * u, d1, -d2, 0.5 * l * l);
-                }
-            }
-            for d in dw.iter_mut().take(width) {
-                *d *= inv_h;
-            }
+            f.first[a] = self.order.first_node(xi[a]);
+            let t = xi[a] - f.first[a] as f64;
+            axis_factors(
+                self.order,
+                t,
+                inv_h,
+                &mut f.values[a][..width],
+                &mut f.derivatives[a][..width],
+            );
         }
         f
+    }
+
+    /// [`BSpline::factors`] written straight into a stencil's storage (`W` = the width): the
+    /// first node, the values and, when `derivatives` is given, the derivatives. The same
+    /// arithmetic, so the same bits.
+    #[inline(always)]
+    pub fn factors_into<const D: usize, const W: usize>(
+        &self,
+        grid: &Grid<D>,
+        x: &Vector<D>,
+        first: &mut [i64; D],
+        values: &mut [[f64; W]; D],
+        mut derivatives: Option<&mut [[f64; W]; D]>,
+    ) {
+        let xi = grid.to_cell_units(x);
+        let inv_h = 1.0 / grid.cell_size;
+        for a in 0..D {
+            first[a] = self.order.first_node(xi[a]);
+            let t = xi[a] - first[a] as f64;
+            let mut scratch = [0.0; W];
+            let dw = match derivatives.as_mut() {
+                Some(d) => &mut d[a],
+                None => &mut scratch,
+            };
+            axis_factors(self.order, t, inv_h, &mut values[a], dw);
+        }
+    }
+}
+
+/// The 1D factors along one axis at `t` cells from the first stencil node: the kernel at
+/// `t − k` in closed form (the branches of `BSplineOrder::kernel` are known from the range of
+/// `t`) into `w`, its derivative times `inv_h` into `dw`.
+#[inline(always)]
+fn axis_factors(order: BSplineOrder, t: f64, inv_h: f64, w: &mut [f64], dw: &mut [f64]) {
+    match order {
+        BSplineOrder::Linear => {
+            // The two nodes of the cell, with the cell's one-sided gradient also on a node.
+            // t ∈ [0, 1].
+            (w[0], w[1]) = (1.0 - t, t);
+            (dw[0], dw[1]) = (-1.0, 1.0);
+        }
+        BSplineOrder::Quadratic => {
+            // t ∈ [0.5, 1.5).
+            let (u, c, l) = (1.5 - t, t - 1.0, t - 0.5);
+            (w[0], w[1], w[2]) = (0.5 * u * u, 0.75 - c * c, 0.5 * l * l);
+            (dw[0], dw[1], dw[2]) = (-u, -2.0 * c, l);
+        }
+        BSplineOrder::Cubic => {
+            // t ∈ [1, 2): distances t, t − 1, 2 − t (mirrored) and 3 − t from the nodes.
+            let (u, r1, r2, l) = (2.0 - t, t - 1.0, 2.0 - t, t - 1.0);
+            let inner = |r: f64| (0.5 * r * r * r - r * r + 2.0 / 3.0, 1.5 * r * r - 2.0 * r);
+            let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
+            (w[0], w[1], w[2], w[3]) = (u * u * u / 6.0, w1, w2, l * l * l / 6.0);
+            (dw[0], dw[1], dw[2], dw[3]) = (-0.5 * u * u, d1, -d2, 0.5 * l * l);
+        }
+    }
+    for d in dw.iter_mut() {
+        *d *= inv_h;
     }
 }
 

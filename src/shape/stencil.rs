@@ -324,29 +324,19 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             .zip(self.values.par_iter_mut())
             .zip(x.par_iter());
         // First node, its storage index and the values; the factors for the derivatives.
-        let fill = |first: &mut [i64; D], base: &mut usize, w: &mut [[f64; W]; D], xp| {
-            let f = shape.factors(grid, xp);
-            *first = f.first;
-            *base = grid.node_index(f.first);
-            for (w, values) in w.iter_mut().zip(&f.values) {
-                w.copy_from_slice(&values[..W]);
-            }
-            f
-        };
         if derivatives {
             self.derivatives.resize(n, [[0.0; W]; D]);
             factors.zip(self.derivatives.par_iter_mut()).for_each(
                 |((((first, base), w), xp), dw)| {
-                    let f = fill(first, base, w, xp);
-                    for (dw, derivatives) in dw.iter_mut().zip(&f.derivatives) {
-                        dw.copy_from_slice(&derivatives[..W]);
-                    }
+                    shape.factors_into(grid, xp, first, w, Some(dw));
+                    *base = grid.node_index(*first);
                 },
             );
         } else {
             self.derivatives.clear();
             factors.for_each(|(((first, base), w), xp)| {
-                fill(first, base, w, xp);
+                shape.factors_into(grid, xp, first, w, None);
+                *base = grid.node_index(*first);
             });
         }
     }
