@@ -7,8 +7,9 @@
 //! stencil lies in its own block and the next one along each axis. Blocks take one of
 //! `2^D` colours by the parity of their block coordinates; two blocks of one colour are at least
 //! two blocks apart along some axis, so they write disjoint nodes. The map runs colour by colour,
-//! the blocks of a colour in parallel, the particles of a block in index order: every node's
-//! sum is taken in an order fixed by the particle positions alone.
+//! the blocks of a colour in parallel, the particles of a block in storage order: every node's
+//! sum is taken in an order fixed by the particles' positions and storage order (which the
+//! step's sorts set from positions alone), never by the number of threads.
 //!
 //! The occupied blocks also give the node blocks a step touches (each occupied block and its
 //! upper neighbours), so the list of active nodes is collected without visiting empty blocks.
