@@ -661,7 +661,12 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
                 c *= w[a][k[a]];
             }
             g.velocity += c * s_w;
-            g.velocity_change += c * s_dv;
+            // Without FLIP the sum adds zeros, which the compiler cannot drop (c may not be
+            // finite). Skipping it frees registers in 3D: grid to particle 106 → 95 ns with
+            // MLS. In 2D the branch made it slower (33.5 → 35.3 ns), so 2D keeps the sum.
+            if D == 2 || v_old.is_some() {
+                g.velocity_change += c * s_dv;
+            }
             if gradient {
                 g.gradient.column_mut(0).axpy(c, &s_dw, 1.0);
             }
