@@ -347,31 +347,31 @@ impl<const D: usize> Sim<D> {
         // 2. Body forces.
         let body = match self.body_force.as_mut() {
             Some(bf) => {
-                // The callback sees the particles in id order.
-                let sorted = !ps.in_id_order();
-                let by_id = |v: &[Vector<D>]| -> Vec<Vector<D>> {
-                    let mut out = vec![Vector::zeros(); v.len()];
-                    for (x, &id) in v.iter().zip(&ps.id) {
-                        out[id as usize] = *x;
+                // The callback sees the particles in id order (the storage order until a sort).
+                let slots = (!ps.in_id_order()).then(|| ps.slots());
+                let acceleration = &mut work.body_acceleration;
+                acceleration.clear();
+                acceleration.resize(ps.len(), Vector::zeros());
+                let result = match &slots {
+                    Some(slots) => {
+                        let by_id = |v: &[Vector<D>]| -> Vec<Vector<D>> {
+                            slots.iter().map(|&p| v[p]).collect()
+                        };
+                        let (reference, current) =
+                            (by_id(&ps.reference_position), by_id(&ps.position));
+                        bf.accelerations(self.time, &reference, &current, acceleration)
                     }
-                    out
-                };
-                let mut accelerations = vec![Vector::zeros(); ps.len()];
-                let result = if sorted {
-                    let (reference, current) = (by_id(&ps.reference_position), by_id(&ps.position));
-                    bf.accelerations(self.time, &reference, &current, &mut accelerations)
-                } else {
-                    bf.accelerations(
+                    None => bf.accelerations(
                         self.time,
                         &ps.reference_position,
                         &ps.position,
-                        &mut accelerations,
-                    )
+                        acceleration,
+                    ),
                 };
                 result.map_err(|m| {
                     Error::new(ErrorKind::Callback, format!("body force failed: {m}"))
                 })?;
-                if let Some(p) = accelerations
+                if let Some(p) = acceleration
                     .iter()
                     .position(|a| a.iter().any(|c| !c.is_finite()))
                 {
@@ -380,12 +380,9 @@ impl<const D: usize> Sim<D> {
                         format!("body force returned a non-finite value for particle {p}"),
                     ));
                 }
-                work.body_acceleration.clear();
-                if sorted {
-                    work.body_acceleration
-                        .extend(ps.id.iter().map(|&id| accelerations[id as usize]));
-                } else {
-                    work.body_acceleration = accelerations;
+                // Back to storage order: slot `p` holds particle `id[p]`.
+                if slots.is_some() {
+                    *acceleration = ps.id.iter().map(|&id| acceleration[id as usize]).collect();
                 }
                 Some(work.body_acceleration.as_slice())
             }
