@@ -23,6 +23,7 @@
 
 pub mod boundary;
 pub mod contact;
+pub mod cpu;
 pub mod error;
 pub mod ffi;
 pub mod grid;

@@ -317,27 +317,58 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.first.resize(n, [0; D]);
         self.base.resize(n, 0);
         self.values.resize(n, [[0.0; W]; D]);
-        let factors = self
-            .first
-            .par_iter_mut()
-            .zip(self.base.par_iter_mut())
-            .zip(self.values.par_iter_mut())
-            .zip(x.par_iter());
-        // First node, its storage index and the values; the factors for the derivatives.
-        if derivatives {
+        // First node, its storage index and the values; the factors for the derivatives. In
+        // chunks, each compiled for the processor's vector instructions (`cpu::wide`).
+        const CHUNK: usize = 1024;
+        let derivatives = if derivatives {
             self.derivatives.resize(n, [[0.0; W]; D]);
-            factors.zip(self.derivatives.par_iter_mut()).for_each(
-                |((((first, base), w), xp), dw)| {
-                    shape.factors_into(grid, xp, first, w, Some(dw));
-                    *base = grid.node_index(*first);
-                },
-            );
+            Some(&mut self.derivatives[..])
         } else {
             self.derivatives.clear();
-            factors.for_each(|(((first, base), w), xp)| {
-                shape.factors_into(grid, xp, first, w, None);
+            None
+        };
+        let one = crate::cpu::inlined(
+            #[inline(always)]
+            |first: &mut [i64; D],
+             base: &mut usize,
+             w: &mut [[f64; W]; D],
+             xp: &Vector<D>,
+             dw: Option<&mut [[f64; W]; D]>| {
+                shape.factors_into(grid, xp, first, w, dw);
                 *base = grid.node_index(*first);
-            });
+            },
+        );
+        let chunks = self
+            .first
+            .par_chunks_mut(CHUNK)
+            .zip(self.base.par_chunks_mut(CHUNK))
+            .zip(self.values.par_chunks_mut(CHUNK))
+            .zip(x.par_chunks(CHUNK));
+        match derivatives {
+            Some(derivatives) => chunks.zip(derivatives.par_chunks_mut(CHUNK)).for_each(
+                |((((first, base), w), x), dw)| {
+                    crate::cpu::wide(
+                        #[inline(always)]
+                        || {
+                            for ((((f, b), w), xp), dw) in
+                                first.iter_mut().zip(base).zip(w).zip(x).zip(dw)
+                            {
+                                one(f, b, w, xp, Some(dw));
+                            }
+                        },
+                    )
+                },
+            ),
+            None => chunks.for_each(|(((first, base), w), x)| {
+                crate::cpu::wide(
+                    #[inline(always)]
+                    || {
+                        for (((f, b), w), xp) in first.iter_mut().zip(base).zip(w).zip(x) {
+                            one(f, b, w, xp, None);
+                        }
+                    },
+                )
+            }),
         }
     }
 

@@ -341,46 +341,49 @@ where
     let flip = plan.flip > 0.0;
     let update_deformation = finish.is_some();
     let apic_inertia = plan.inverse_inertia.is_some();
-    let gather = |p: usize, u: &mut ParticleUpdate<D>| {
-        let xp = ps.position[p];
-        if let Some(v) = rigid.get(ps.material[p] as usize).copied().flatten() {
-            u.position = xp + dt * v;
-            u.velocity = v;
-            u.affine = Matrix::zeros();
-            u.deformation_gradient = ps.deformation_gradient[p];
-            return;
-        }
-        let nodes = fields.of(p);
-        let g = stencils.gather(
-            grid,
-            p,
-            &xp,
-            &nodes.velocity,
-            flip.then_some(&nodes.velocity_old[..]),
-            apic_inertia,
-            !MLS,
-        );
-        let (v_pic, dv) = (g.velocity, g.velocity_change);
-        // `C_p = B_p / D` when the inertia is constant; under MLS it is the velocity gradient.
-        let affine = plan.inverse_inertia.map(|inv| g.affine * inv);
-        let l = match affine {
-            Some(c) if MLS => c,
-            _ => g.gradient,
-        };
-        u.position = xp + dt * v_pic;
-        u.velocity = if flip {
-            (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
-        } else {
-            v_pic
-        };
-        if plan.apic {
-            u.affine = affine.unwrap_or(l);
-        }
-        if update_deformation {
-            u.deformation_gradient =
-                (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
-        }
-    };
+    let gather = crate::cpu::inlined(
+        #[inline(always)]
+        |p: usize, u: &mut ParticleUpdate<D>| {
+            let xp = ps.position[p];
+            if let Some(v) = rigid.get(ps.material[p] as usize).copied().flatten() {
+                u.position = xp + dt * v;
+                u.velocity = v;
+                u.affine = Matrix::zeros();
+                u.deformation_gradient = ps.deformation_gradient[p];
+                return;
+            }
+            let nodes = fields.of(p);
+            let g = stencils.gather(
+                grid,
+                p,
+                &xp,
+                &nodes.velocity,
+                flip.then_some(&nodes.velocity_old[..]),
+                apic_inertia,
+                !MLS,
+            );
+            let (v_pic, dv) = (g.velocity, g.velocity_change);
+            // `C_p = B_p / D` when the inertia is constant; under MLS it is the velocity gradient.
+            let affine = plan.inverse_inertia.map(|inv| g.affine * inv);
+            let l = match affine {
+                Some(c) if MLS => c,
+                _ => g.gradient,
+            };
+            u.position = xp + dt * v_pic;
+            u.velocity = if flip {
+                (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
+            } else {
+                v_pic
+            };
+            if plan.apic {
+                u.affine = affine.unwrap_or(l);
+            }
+            if update_deformation {
+                u.deformation_gradient =
+                    (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+            }
+        },
+    );
     let writer = new.writer();
     // Particles in chunks: the gathers of a chunk, then its constitutive updates and stores.
     // Each loop is short, so the processor overlaps consecutive particles' long dependency
@@ -392,23 +395,31 @@ where
         .par_chunks_mut(CHUNK)
         .enumerate()
         .map_init(PlasticState::default, |scratch, (c, ok)| {
-            let first = c * CHUNK;
-            let mut updates = [ParticleUpdate::<D>::default(); CHUNK];
-            for (k, u) in updates[..ok.len()].iter_mut().enumerate() {
-                gather(first + k, u);
-            }
-            let mut speed = 0.0f64;
-            for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
-                let p = first + k;
-                // SAFETY: every particle index is visited by one task only.
-                let finished = finish.map_or(Some(0.0), |f| {
-                    f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
-                });
-                *ok = finished.is_some();
-                speed = speed.max(finished.unwrap_or(0.0));
-                unsafe { writer.store(p, u) };
-            }
-            speed
+            crate::cpu::wide(
+                #[inline(always)]
+                || {
+                    let first = c * CHUNK;
+                    let mut updates = [ParticleUpdate::<D>::default(); CHUNK];
+                    for (k, u) in updates[..ok.len()].iter_mut().enumerate() {
+                        gather(first + k, u);
+                    }
+                    let mut speed = 0.0f64;
+                    for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
+                        let p = first + k;
+                        // SAFETY: every particle index is visited by one task only.
+                        let finished = match finish {
+                            Some(f) => {
+                                f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
+                            }
+                            None => Some(0.0),
+                        };
+                        *ok = finished.is_some();
+                        speed = speed.max(finished.unwrap_or(0.0));
+                        unsafe { writer.store(p, u) };
+                    }
+                    speed
+                },
+            )
         })
         .reduce(|| 0.0, f64::max)
 }

@@ -64,107 +64,115 @@ pub fn particle_to_grid<const D: usize, S, A>(
     // which adds the body force to the momentum).
     let with_body_force = mls.is_none()
         && forces.is_some_and(|f| f.body.is_some() || f.gravity != Vector::<D>::zeros());
-    let scatter = |p: usize| {
-        if body.is_some_and(|b| ps.material[p] != b) {
-            return;
-        }
-        let lumping = lumping
-            .and_then(|l| l.lumping_of(p))
-            .filter(|_| with_lumping);
-        let m = ps.mass[p];
-        let v = velocity(p);
-        let c = affine.as_ref().map(|a| a(p));
-        let xp = ps.position[p];
-        let mut force = forces.map(|f| {
-            let b = match f.body {
-                Some(b) => f.gravity + b[p],
-                None => f.gravity,
-            };
-            (-ps.volume(p) * ps.stress[p], b)
-        });
-        // Momentum of the particle and its affine part, `m v + m C (x_I − x_p)`.
-        let mut mv = m * v;
-        let mut mc = c.map(|c| m * c);
-        if let (Some((dt, inverse_inertia)), Some((vs, b))) = (mls, force) {
-            // MLS: `Δt f_I = Ψ_I (Δt m b + (Δt/D) (−V σ)(x_I − x_p))`, on the momentum.
-            mv += (dt * m) * b;
-            mc = mc.map(|mc| mc + (dt * inverse_inertia) * vs);
-            force = None;
-        }
-        let node_sums = |s: usize, node: StencilNode<D>, offset: Vector<D>| {
-            let StencilNode {
-                node: n,
-                value: w,
-                gradient: g,
-            } = node;
-            let shift = lumping.map_or(0.0, |l| l[s] - w);
-            if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
+    let scatter = crate::cpu::inlined(
+        #[inline(always)]
+        |p: usize| {
+            if body.is_some_and(|b| ps.material[p] != b) {
                 return;
             }
-            // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
-            // one colour at a time.
-            unsafe {
-                out.touch(n);
-                let mut momentum = mv;
-                if let Some(mc) = mc {
-                    momentum += mc * offset;
+            let lumping = lumping
+                .and_then(|l| l.lumping_of(p))
+                .filter(|_| with_lumping);
+            let m = ps.mass[p];
+            let v = velocity(p);
+            let c = affine.as_ref().map(|a| a(p));
+            let xp = ps.position[p];
+            let mut force = forces.map(|f| {
+                let b = match f.body {
+                    Some(b) => f.gravity + b[p],
+                    None => f.gravity,
+                };
+                (-ps.volume(p) * ps.stress[p], b)
+            });
+            // Momentum of the particle and its affine part, `m v + m C (x_I − x_p)`.
+            let mut mv = m * v;
+            let mut mc = c.map(|c| m * c);
+            if let (Some((dt, inverse_inertia)), Some((vs, b))) = (mls, force) {
+                // MLS: `Δt f_I = Ψ_I (Δt m b + (Δt/D) (−V σ)(x_I − x_p))`, on the momentum.
+                mv += (dt * m) * b;
+                mc = mc.map(|mc| mc + (dt * inverse_inertia) * vs);
+                force = None;
+            }
+            let node_sums = |s: usize, node: StencilNode<D>, offset: Vector<D>| {
+                let StencilNode {
+                    node: n,
+                    value: w,
+                    gradient: g,
+                } = node;
+                let shift = lumping.map_or(0.0, |l| l[s] - w);
+                if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
+                    return;
                 }
-                scatter_add(out.momentum, n, w * momentum);
-                if with_lumping {
-                    scatter_add(out.lumping.1, n, shift * momentum);
-                    if let Some((_, b)) = force {
-                        scatter_add(out.lumping.0, n, m * shift);
-                        if with_body_force {
-                            scatter_add(out.lumping.2, n, (m * shift) * b);
+                // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
+                // one colour at a time.
+                unsafe {
+                    out.touch(n);
+                    let mut momentum = mv;
+                    if let Some(mc) = mc {
+                        momentum += mc * offset;
+                    }
+                    scatter_add(out.momentum, n, w * momentum);
+                    if with_lumping {
+                        scatter_add(out.lumping.1, n, shift * momentum);
+                        if let Some((_, b)) = force {
+                            scatter_add(out.lumping.0, n, m * shift);
+                            if with_body_force {
+                                scatter_add(out.lumping.2, n, (m * shift) * b);
+                            }
+                        }
+                    }
+                    if with_mass {
+                        scatter_add(out.mass, n, m * w);
+                        if with_gradient {
+                            scatter_add(out.mass_gradient, n, m * g);
+                        }
+                    }
+                    if let Some((vs, b)) = force {
+                        let grad = match vc {
+                            Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
+                            None => g,
+                        };
+                        scatter_add(out.force, n, vs * grad);
+                        if !with_body_force {
+                            // Nothing to add.
+                        } else if keep_body_force {
+                            scatter_add(out.body_force, n, (m * w) * b);
+                        } else {
+                            scatter_add(out.force, n, (m * w) * b);
                         }
                     }
                 }
-                if with_mass {
-                    scatter_add(out.mass, n, m * w);
-                    if with_gradient {
-                        scatter_add(out.mass_gradient, n, m * g);
-                    }
-                }
-                if let Some((vs, b)) = force {
-                    let grad = match vc {
-                        Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
-                        None => g,
-                    };
-                    scatter_add(out.force, n, vs * grad);
-                    if !with_body_force {
-                        // Nothing to add.
-                    } else if keep_body_force {
-                        scatter_add(out.body_force, n, (m * w) * b);
-                    } else {
-                        scatter_add(out.force, n, (m * w) * b);
-                    }
-                }
+            };
+            // A factored scatter when the stencils have one (B-spline factors; no VC, no lumping).
+            let input = ScatterInput {
+                position: xp,
+                mass: m,
+                momentum: mv,
+                affine: mc,
+                with_mass,
+                force,
+                with_body_force,
+                keep_body_force,
+                with_gradient,
+            };
+            // SAFETY: as above.
+            if vc.is_none() && lumping.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
+                return;
             }
-        };
-        // A factored scatter when the stencils have one (B-spline factors; no VC, no lumping).
-        let input = ScatterInput {
-            position: xp,
-            mass: m,
-            momentum: mv,
-            affine: mc,
-            with_mass,
-            force,
-            with_body_force,
-            keep_body_force,
-            with_gradient,
-        };
-        // SAFETY: as above.
-        if vc.is_none() && lumping.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
-            return;
-        }
-        stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
-    };
+            stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
+        },
+    );
     for colour in &bins.colours {
         colour.par_iter().for_each(|&b| {
             let range = bins.occupied[b as usize].1.clone();
-            for &p in &bins.order[range] {
-                scatter(p as usize);
-            }
+            crate::cpu::wide(
+                #[inline(always)]
+                || {
+                    for &p in &bins.order[range] {
+                        scatter(p as usize);
+                    }
+                },
+            )
         });
     }
     bins.collect_active(grid, nodes);
