@@ -653,7 +653,11 @@ fn results_do_not_depend_on_the_instruction_set() {
             sim.step(dt).unwrap();
         }
         if plastic {
-            let yielded = sim.particles().plastic.iter().filter(|s| s.plastic_strain > 0.0);
+            let yielded = sim
+                .particles()
+                .plastic
+                .iter()
+                .filter(|s| s.plastic_strain > 0.0);
             assert!(yielded.count() > 0, "the soil block did not yield");
         }
         sim.particles().clone()
@@ -666,9 +670,15 @@ fn results_do_not_depend_on_the_instruction_set() {
         (Transfer::Mls, false),
         (Transfer::Apic, true),
     ] {
-        let (base, wide) = (run::<2>(true, transfer, plastic), run::<2>(false, transfer, plastic));
+        let (base, wide) = (
+            run::<2>(true, transfer, plastic),
+            run::<2>(false, transfer, plastic),
+        );
         assert_eq!(base, wide, "2D {transfer:?} plastic {plastic}");
-        let (base, wide) = (run::<3>(true, transfer, plastic), run::<3>(false, transfer, plastic));
+        let (base, wide) = (
+            run::<3>(true, transfer, plastic),
+            run::<3>(false, transfer, plastic),
+        );
         assert_eq!(base, wide, "3D {transfer:?} plastic {plastic}");
     }
 }
