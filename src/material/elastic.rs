@@ -84,11 +84,8 @@ impl Constitutive for NeoHookean {
     }
     fn cauchy_stress(&self, f: &Matrix3<f64>) -> Matrix3<f64> {
         let j = f.determinant();
-        let b = f * f.transpose();
-        // As `stress_block` (one division), so that the two agree bit for bit.
-        let inverse_j = 1.0 / j;
-        (b - Matrix3::identity()) * (self.0.mu * inverse_j)
-            + Matrix3::identity() * (self.0.lambda * j.ln() * inverse_j)
+        // As `stress_block`, so that the two agree bit for bit.
+        self.stress_block_with_log::<3>(f, j, j.ln()).0
     }
     fn strain_energy_density(&self, f: &Matrix3<f64>) -> f64 {
         let lnj = f.determinant().ln();
@@ -130,7 +127,7 @@ impl NeoHookean {
     }
 
     /// [`NeoHookean::stress_block`] given `ln_j = ln j` (the step takes the logarithm once for
-    /// the stress and the wave speed).
+    /// the stress and the wave speed): [`NeoHookean::stress_lanes`] with one lane.
     #[inline(always)]
     pub fn stress_block_with_log<const D: usize>(
         &self,
@@ -138,15 +135,62 @@ impl NeoHookean {
         j: f64,
         ln_j: f64,
     ) -> (Matrix<D>, f64) {
-        let b = f * f.transpose();
-        // One division (the hot loop of grid to particle waits on it).
-        let inverse_j = 1.0 / j;
-        let shear = self.0.mu * inverse_j;
-        let volumetric = self.0.lambda * ln_j * inverse_j;
-        let s = (b - Matrix::<D>::identity()) * shear + Matrix::<D>::identity() * volumetric;
-        // In plane strain b_33 − 1 = 0, so σ_33 is the volumetric term alone.
-        let out_of_plane = if D == 2 { volumetric } else { 0.0 };
-        (s, -(s.trace() + out_of_plane) / 3.0)
+        let lanes: [[[f64; 1]; D]; D] =
+            std::array::from_fn(|a| std::array::from_fn(|b| [f[(a, b)]]));
+        let (mut s, mut pressure) = ([[[0.0; 1]; D]; D], [0.0]);
+        self.stress_lanes(&lanes, &[j], &[ln_j], &mut s, &mut pressure);
+        (Matrix::<D>::from_fn(|a, b| s[a][b][0]), pressure[0])
+    }
+
+    /// The stress of `N` particles at once: `f[a][b][k]` is `F_ab` of particle `k`, `j` and
+    /// `ln_j` its `det F > 0` and `ln det F`; writes the `D×D` Cauchy stress into `s` (the same
+    /// layout) and the pressure. Each lane takes the same operations in the same order as every
+    /// other, whatever `N`, so the compiler can run the lanes in vector registers and a particle's
+    /// stress is the same bits alone (`N = 1`, [`NeoHookean::stress_block_with_log`]) or in a
+    /// chunk.
+    ///
+    /// `σ = (μ (b − I) + λ ln J I) / J` with `b = F Fᵀ`; in plane strain `σ_33 = λ ln J / J`.
+    #[inline(always)]
+    pub fn stress_lanes<const D: usize, const N: usize>(
+        &self,
+        f: &[[[f64; N]; D]; D],
+        j: &[f64; N],
+        ln_j: &[f64; N],
+        s: &mut [[[f64; N]; D]; D],
+        pressure: &mut [f64; N],
+    ) {
+        let (mu, lambda) = (self.0.mu, self.0.lambda);
+        for k in 0..N {
+            // One division (the hot loop of grid to particle waits on it).
+            let inverse_j = 1.0 / j[k];
+            let shear = mu * inverse_j;
+            let volumetric = lambda * ln_j[k] * inverse_j;
+            let mut trace = 0.0;
+            for a in 0..D {
+                for c in a..D {
+                    // b_ac = Σ_e F_ae F_ce, in the order of e.
+                    let mut b = f[a][0][k] * f[c][0][k];
+                    for (fa, fc) in f[a][1..].iter().zip(&f[c][1..]) {
+                        b += fa[k] * fc[k];
+                    }
+                    let sigma = if a == c {
+                        (b - 1.0) * shear + volumetric
+                    } else {
+                        b * shear
+                    };
+                    s[a][c][k] = sigma;
+                    s[c][a][k] = sigma;
+                }
+                trace = if a == 0 {
+                    s[0][0][k]
+                } else {
+                    trace + s[a][a][k]
+                };
+            }
+            // In plane strain b_33 − 1 = 0, so σ_33 is the volumetric term alone.
+            let out_of_plane = if D == 2 { volumetric } else { 0.0 };
+            pressure[k] = -(trace + out_of_plane) / 3.0;
+        }
     }
 }
 

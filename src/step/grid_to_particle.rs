@@ -253,7 +253,27 @@ pub trait Finish<const D: usize>: Sync {
         u: &mut ParticleUpdate<D>,
         history: &mut PlasticState,
     ) -> Option<f64>;
+
+    /// [`Finish::finish`] for the particles `first..first + us.len()` (a chunk of grid to
+    /// particle, at most 16) at once, when the chunk allows it (all of one elastic material,
+    /// say): fills `speeds` with what `finish` would return for each and returns true. Returns
+    /// false, having changed nothing, when the chunk has to be finished particle by particle.
+    /// Each particle's result is the same bits as `finish` gives it.
+    #[inline(always)]
+    fn finish_chunk(
+        &self,
+        _first: usize,
+        _us: &mut [ParticleUpdate<D>],
+        _speeds: &mut [Option<f64>],
+    ) -> bool {
+        false
+    }
 }
+
+/// Particles per chunk of grid to particle: the gathers of a chunk, then its constitutive
+/// updates and stores. Each loop is short, so the processor overlaps consecutive particles' long
+/// dependency chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
+pub(crate) const CHUNK: usize = 16;
 
 /// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
 pub struct NoFinish;
@@ -385,10 +405,6 @@ where
         },
     );
     let writer = new.writer();
-    // Particles in chunks: the gathers of a chunk, then its constitutive updates and stores.
-    // Each loop is short, so the processor overlaps consecutive particles' long dependency
-    // chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
-    const CHUNK: usize = 16;
     admissible.clear();
     admissible.resize(ps.len(), false);
     admissible
@@ -404,10 +420,16 @@ where
                         gather(first + k, u);
                     }
                     let mut speed = 0.0f64;
+                    let n = ok.len();
+                    let mut speeds = [None; CHUNK];
+                    let whole = finish.is_some_and(|f| {
+                        f.finish_chunk(first, &mut updates[..n], &mut speeds[..n])
+                    });
                     for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
                         let p = first + k;
                         // SAFETY: every particle index is visited by one task only.
                         let finished = match finish {
+                            _ if whole => speeds[k],
                             Some(f) => {
                                 f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
                             }

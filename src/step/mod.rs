@@ -45,6 +45,7 @@ use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
 use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
+use grid_to_particle::CHUNK;
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
@@ -818,6 +819,62 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
         // The signal speed as `Sim::signal_speed` takes it from the committed state.
         u.is_admissible(self.grid, j)
             .then(|| wave_speed.unwrap_or_else(|| material.wave_speed(j)) + u.velocity.norm())
+    }
+
+    /// A chunk of one neo-Hookean material with no particle inverted: the steps of `finish`
+    /// over the chunk's particles as lanes (`NeoHookean::stress_lanes`), which the compiler
+    /// runs in vector registers; the same operations per particle, so the same bits.
+    #[inline(always)]
+    fn finish_chunk(
+        &self,
+        first: usize,
+        us: &mut [ParticleUpdate<D>],
+        speeds: &mut [Option<f64>],
+    ) -> bool {
+        let n = us.len();
+        let ps = self.particles;
+        let id = ps.material[first];
+        if ps.material[first..first + n].iter().any(|&m| m != id) {
+            return false;
+        }
+        let crate::material::Material::NeoHookean(m) = &self.materials[id as usize] else {
+            return false;
+        };
+        // Lanes past `n` hold the identity (J = 1), and nothing reads them back.
+        let (mut f, mut j) = ([[[0.0; CHUNK]; D]; D], [1.0; CHUNK]);
+        for (k, u) in us.iter().enumerate() {
+            j[k] = crate::determinant(&u.deformation_gradient);
+            for (a, row) in f.iter_mut().enumerate() {
+                for (b, lane) in row.iter_mut().enumerate() {
+                    lane[k] = u.deformation_gradient[(a, b)];
+                }
+            }
+        }
+        for (a, row) in f.iter_mut().enumerate() {
+            row[a][n..].fill(1.0);
+        }
+        // NaN or not positive: `finish` handles it (and says why).
+        if !j[..n].iter().all(|&j| j > 0.0) {
+            return false;
+        }
+        let mut ln_j = [0.0; CHUNK];
+        for (l, j) in ln_j.iter_mut().zip(&j) {
+            *l = j.ln();
+        }
+        let (mut s, mut pressure) = ([[[0.0; CHUNK]; D]; D], [0.0; CHUNK]);
+        m.stress_lanes(&f, &j, &ln_j, &mut s, &mut pressure);
+        let wave_speed: [f64; CHUNK] = std::array::from_fn(|k| m.wave_speed_from_log(ln_j[k]));
+        for (k, (u, speed)) in us.iter_mut().zip(speeds.iter_mut()).enumerate() {
+            u.stress = Matrix::<D>::from_fn(|a, b| s[a][b][k]);
+            u.pressure = pressure[k];
+            if self.any_wall {
+                self.walls.clamp_to_walls(self.grid, &mut u.position);
+            }
+            *speed = u
+                .is_admissible(self.grid, j[k])
+                .then(|| wave_speed[k] + u.velocity.norm());
+        }
+        true
     }
 }
 

@@ -683,6 +683,104 @@ fn results_do_not_depend_on_the_instruction_set() {
     }
 }
 
+/// A chunk of particles finished at once (`ConstitutiveUpdate::finish_chunk`, the stresses as
+/// vector lanes) gives each particle the same bits as finishing it alone: stress, pressure,
+/// position (against a wall) and signal speed, in 2D and 3D, for full and partial chunks, with a
+/// particle outside the grid (inadmissible, `None`). A chunk with an inverted particle, two
+/// materials or a plastic one is left to `finish` (false, nothing changed).
+#[test]
+fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
+    use super::grid_to_particle::{Finish, ParticleUpdate, CHUNK};
+    fn check<const D: usize>() {
+        let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [10; D], 0.1).unwrap();
+        sim.set_boundary(0, Side::Low, Boundary::Slip).unwrap();
+        let rubber = sim.add_material(Material::neo_hookean(1000.0, 1e6, 0.3).unwrap());
+        let soil =
+            sim.add_material(Material::drucker_prager(1000.0, 1e6, 0.3, 30.0, 0.0, 0.0).unwrap());
+        let n = 2 * CHUNK;
+        let x: Vec<Vector<D>> = (0..n)
+            .map(|k| Vector::<D>::from_element(0.2 + 0.02 * k as f64))
+            .collect();
+        sim.add_particles(rubber, &x, &vec![1e-3; n], None).unwrap();
+        let ps = sim.particles.clone();
+        let finish = super::ConstitutiveUpdate {
+            grid: &sim.grid,
+            particles: &ps,
+            materials: &sim.materials,
+            walls: &sim.options.walls,
+            any_wall: sim.options.walls.any_wall(),
+            dt: 1e-4,
+        };
+        let mut x = 0.37_f64;
+        let mut next = || {
+            x = (x * 9301.0 + 0.49297).fract();
+            x - 0.5
+        };
+        let updates: Vec<ParticleUpdate<D>> = (0..n)
+            .map(|k| {
+                let mut u = ParticleUpdate::<D> {
+                    deformation_gradient: Matrix::<D>::identity()
+                        + 0.4 * Matrix::<D>::from_fn(|_, _| next()),
+                    velocity: Vector::<D>::from_fn(|_, _| next()),
+                    ..Default::default()
+                };
+                // Particle 3 pushed through the wall at x = 0, particle 5 out of the grid.
+                u.position = Vector::<D>::from_element(0.5 + 0.3 * next());
+                if k == 3 {
+                    u.position[0] = -0.01;
+                }
+                if k == 5 {
+                    u.position[1] = 7.0;
+                }
+                u
+            })
+            .collect();
+        for len in [CHUNK, 7] {
+            let mut alone = updates[..len].to_vec();
+            let expected: Vec<Option<f64>> = alone
+                .iter_mut()
+                .enumerate()
+                .map(|(p, u)| finish.finish(p, u, &mut PlasticState::default()))
+                .collect();
+            assert!(expected[5].is_none() && expected[0].is_some());
+            assert_eq!(alone[3].position[0], 0.0);
+            let mut together = updates[..len].to_vec();
+            let mut speeds = vec![Some(-1.0); len];
+            assert!(finish.finish_chunk(0, &mut together, &mut speeds));
+            assert_eq!(speeds, expected, "{D}D, {len} particles");
+            for (a, b) in alone.iter().zip(&together) {
+                assert_eq!(a.stress, b.stress);
+                assert_eq!(a.pressure.to_bits(), b.pressure.to_bits());
+                assert_eq!(a.position, b.position);
+            }
+        }
+        // Left to `finish`: an inverted particle; two materials; a plastic material.
+        let mut inverted = updates[..CHUNK].to_vec();
+        inverted[2].deformation_gradient[(0, 0)] = -1.0;
+        inverted[2].deformation_gradient[(1, 1)] = 1.0;
+        let mut speeds = vec![None; CHUNK];
+        let before = inverted.clone();
+        assert!(!finish.finish_chunk(0, &mut inverted, &mut speeds));
+        assert_eq!(inverted, before);
+        let mut mixed = ps.clone();
+        mixed.material[CHUNK + 1] = soil;
+        let finish_mixed = super::ConstitutiveUpdate {
+            particles: &mixed,
+            ..finish
+        };
+        let mut chunk = updates[CHUNK..].to_vec();
+        assert!(!finish_mixed.finish_chunk(CHUNK, &mut chunk, &mut speeds));
+        mixed.material.fill(soil);
+        let finish_soil = super::ConstitutiveUpdate {
+            particles: &mixed,
+            ..finish
+        };
+        assert!(!finish_soil.finish_chunk(CHUNK, &mut chunk, &mut speeds));
+    }
+    check::<2>();
+    check::<3>();
+}
+
 /// RK of order 2 takes negative values, so the lumped mass `Σ m_p Ψ_I` of nodes at the edge of a
 /// body is negative or tiny there; the step blends in the nonnegative Shepard lumping at those
 /// nodes. Free fall stays exact (mass, momentum and body force are lumped alike at every node) and
