@@ -255,7 +255,7 @@ pub trait Finish<const D: usize>: Sync {
     ) -> Option<f64>;
 
     /// [`Finish::finish`] for the particles `first..first + us.len()` (a chunk of grid to
-    /// particle, at most 16) at once, when the chunk allows it (all of one elastic material,
+    /// particle, at most 8) at once, when the chunk allows it (all of one elastic material,
     /// say): fills `speeds` with what `finish` would return for each and returns true. Returns
     /// false, having changed nothing, when the chunk has to be finished particle by particle.
     /// Each particle's result is the same bits as `finish` gives it.
@@ -273,7 +273,7 @@ pub trait Finish<const D: usize>: Sync {
 /// Particles per chunk of grid to particle: the gathers of a chunk, then its constitutive
 /// updates and stores. Each loop is short, so the processor overlaps consecutive particles' long
 /// dependency chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
-pub(crate) const CHUNK: usize = 16;
+pub(crate) const CHUNK: usize = 8;
 
 /// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
 pub struct NoFinish;
