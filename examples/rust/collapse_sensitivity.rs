@@ -14,6 +14,8 @@
 //! * `--method bspline2|bspline2-mls|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1
 //!   (ã = 2), with material-point integration or VC of order 1 (the surface found from the
 //!   particles at every step); `bspline2-mls` is the quadratic B-spline with the MLS transfer.
+//! * `--flip F`: the PIC/FLIP transfer with FLIP fraction `F` instead of APIC (`0` is PIC, whose
+//!   velocity smoothing dissipates energy where the velocity jumps, as at the column's impact).
 //! * `--rheology d,Δμ,I0`: the μ(I) rate dependence of the friction (grain diameter in m, the
 //!   friction gained at large inertial numbers, the reference inertial number); none by default.
 //! * `--thick k1,k2,..`: also the run-out of the part of the deposit thicker than `k` particle
@@ -88,6 +90,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .into())
         }
     };
+    if let Some(f) = value("--flip") {
+        let flip: f64 = f.parse()?;
+        base.transfer = rkmpm::Transfer::PicFlip { flip };
+    }
     if let Some(r) = value("--rheology") {
         let v: Vec<f64> = r.split(',').map(str::parse).collect::<Result<_, _>>()?;
         if v.len() != 3 {
@@ -96,8 +102,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         base.rheology = Some(InertialRheology::new(v[1], v[2], v[0])?);
     }
     println!(
-        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, floor μ {:.3}, method {method}, rheology {:?}\n",
-        base.young, base.floor_friction, base.rheology
+        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, floor μ {:.3}, method {method}, transfer {:?}, rheology {:?}\n",
+        base.young, base.floor_friction, base.transfer, base.rheology
     );
     let thick: Vec<f64> = value("--thick").map_or(Ok(Vec::new()), |v| {
         v.split(',').map(str::parse).collect::<Result<_, _>>()
