@@ -812,13 +812,9 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
             *history = state;
             (block(&s3), pressure(&s3))
         };
-        // Particles stay inside the walls (see `Walls::clamp_to_walls`).
-        if self.any_wall {
-            self.walls.clamp_to_walls(self.grid, &mut u.position);
-        }
-        // The signal speed as `Sim::signal_speed` takes it from the committed state.
-        u.is_admissible(self.grid, j)
-            .then(|| wave_speed.unwrap_or_else(|| material.wave_speed(j)) + u.velocity.norm())
+        self.complete(u, j, || {
+            wave_speed.unwrap_or_else(|| material.wave_speed(j))
+        })
     }
 
     /// A chunk of one neo-Hookean material with no particle inverted: the steps of `finish`
@@ -867,14 +863,29 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
         for (k, (u, speed)) in us.iter_mut().zip(speeds.iter_mut()).enumerate() {
             u.stress = Matrix::<D>::from_fn(|a, b| s[a][b][k]);
             u.pressure = pressure[k];
-            if self.any_wall {
-                self.walls.clamp_to_walls(self.grid, &mut u.position);
-            }
-            *speed = u
-                .is_admissible(self.grid, j[k])
-                .then(|| wave_speed[k] + u.velocity.norm());
+            *speed = self.complete(u, j[k], || wave_speed[k]);
         }
         true
+    }
+}
+
+impl<const D: usize> ConstitutiveUpdate<'_, D> {
+    /// The end of `finish` once the stress is in `u` (`j = det F > 0`): the particle kept
+    /// inside the walls (`Walls::clamp_to_walls`), and its signal speed `c + |v|` as
+    /// `Sim::signal_speed` takes it from the committed state, or `None` when the new state is
+    /// not admissible.
+    #[inline(always)]
+    fn complete(
+        &self,
+        u: &mut ParticleUpdate<D>,
+        j: f64,
+        wave_speed: impl FnOnce() -> f64,
+    ) -> Option<f64> {
+        if self.any_wall {
+            self.walls.clamp_to_walls(self.grid, &mut u.position);
+        }
+        u.is_admissible(self.grid, j)
+            .then(|| wave_speed() + u.velocity.norm())
     }
 }
 
