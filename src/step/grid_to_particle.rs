@@ -22,6 +22,9 @@ pub struct ParticleUpdate<const D: usize> {
 }
 
 impl<const D: usize> Default for ParticleUpdate<D> {
+    // Inlined into the chunk loops (compiled for AVX2): out of line, its stores and the loads
+    // that copy it into the chunk's array stalled.
+    #[inline(always)]
     fn default() -> Self {
         ParticleUpdate {
             position: Vector::zeros(),
