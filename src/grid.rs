@@ -364,6 +364,7 @@ impl<const D: usize> GridNodes<D> {
 /// coloured particle-to-grid map (`step::bins`): the caller guarantees that no two threads write
 /// the same node. Nodes written are marked touched; [`GridNodes::collect_touched`] lists them
 /// afterwards. The slots of nodes listed before the scatter (by VC) stay readable.
+#[derive(Clone, Copy)]
 pub struct NodeScatter<'a, const D: usize> {
     pub mass: *mut f64,
     pub momentum: *mut Vector<D>,

@@ -77,6 +77,16 @@ pub struct StencilNode<const D: usize> {
 
 /// The stencils of all particles of a step, visited node by node.
 pub trait StencilView<const D: usize>: Sync {
+    /// The view as plain values (slices and scalars) that a phase copies into each parallel
+    /// task: held in registers, they are not reloaded after every store to the grid, which the
+    /// compiler cannot prove leaves them alone.
+    type Local<'a>: StencilView<D> + Copy
+    where
+        Self: 'a;
+
+    /// See [`StencilView::Local`].
+    fn local(&self) -> Self::Local<'_>;
+
     /// Calls `f(s, node)` for every slot `s` of the stencil of particle `p` (slots may have zero
     /// value and gradient).
     fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>));
@@ -228,6 +238,13 @@ impl<const D: usize> Stencils<D> {
 }
 
 impl<const D: usize> StencilView<D> for Stencils<D> {
+    type Local<'a> = &'a Stencils<D>;
+
+    #[inline(always)]
+    fn local(&self) -> &Stencils<D> {
+        self
+    }
+
     #[inline(always)]
     fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
         let (ns, ws, gs) = self.of(p);
@@ -256,6 +273,28 @@ impl<const D: usize> StencilView<D> for Stencils<D> {
     }
 }
 
+impl<const D: usize> StencilView<D> for &Stencils<D> {
+    type Local<'a>
+        = Self
+    where
+        Self: 'a;
+
+    #[inline(always)]
+    fn local(&self) -> Self {
+        self
+    }
+
+    #[inline(always)]
+    fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
+        (**self).for_each(p, f)
+    }
+
+    #[inline(always)]
+    fn offset(&self, grid: &Grid<D>, p: usize, s: usize, node: usize, xp: &Vector<D>) -> Vector<D> {
+        (**self).offset(grid, p, s, node, xp)
+    }
+}
+
 /// The stencils of a tensor-product B-spline with `W` nodes per axis, stored as 1D factors.
 #[derive(Debug, Clone)]
 pub struct TensorStencils<const D: usize, const W: usize> {
@@ -268,6 +307,18 @@ pub struct TensorStencils<const D: usize, const W: usize> {
     base: Vec<usize>,
     values: Vec<[[f64; W]; D]>,
     derivatives: Vec<[[f64; W]; D]>,
+}
+
+/// [`TensorStencils`] as slices and scalars ([`StencilView::Local`]).
+#[derive(Debug, Clone, Copy)]
+pub struct TensorView<'a, const D: usize, const W: usize> {
+    strides: [usize; D],
+    origin: Vector<D>,
+    cell_size: f64,
+    first: &'a [[i64; D]],
+    base: &'a [usize],
+    values: &'a [[[f64; W]; D]],
+    derivatives: &'a [[[f64; W]; D]],
 }
 
 impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
@@ -386,7 +437,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     }
 }
 
-impl<const D: usize, const W: usize> TensorStencils<D, W> {
+impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     /// Visits the stencil of particle `p`, with `x_I − x_p` when `xp` is given (zero otherwise).
     #[inline(always)]
     fn visit(
@@ -435,7 +486,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     }
 }
 
-impl<const D: usize, const W: usize> TensorStencils<D, W> {
+impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     /// Scatter with the factors of each row: `Ψ = w_0 c`, `∇Ψ = (w_0' c, w_0 c_1, …)`, the
     /// momentum `m v + m C (x_I − x_p)` split into a row part and an axis-0 part, the force
     /// `−V σ ∇Ψ = w_0' (c σ_0) + w_0 (Σ_a c_a σ_a)` with the row sums taken once.
@@ -568,6 +619,74 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
 }
 
 impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
+    type Local<'a> = TensorView<'a, D, W>;
+
+    #[inline(always)]
+    fn local(&self) -> TensorView<'_, D, W> {
+        TensorView {
+            strides: self.strides,
+            origin: self.origin,
+            cell_size: self.cell_size,
+            first: &self.first,
+            base: &self.base,
+            values: &self.values,
+            derivatives: &self.derivatives,
+        }
+    }
+
+    #[inline(always)]
+    fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
+        self.local().for_each(p, f)
+    }
+
+    #[inline(always)]
+    fn for_each_with_offset(
+        &self,
+        grid: &Grid<D>,
+        p: usize,
+        xp: Option<&Vector<D>>,
+        f: impl FnMut(usize, StencilNode<D>, Vector<D>),
+    ) {
+        self.local().for_each_with_offset(grid, p, xp, f)
+    }
+
+    #[inline(always)]
+    unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
+        self.local().scatter(p, input, out)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn gather(
+        &self,
+        grid: &Grid<D>,
+        p: usize,
+        xp: &Vector<D>,
+        v: &[Vector<D>],
+        v_old: Option<&[Vector<D>]>,
+        affine: bool,
+        gradient: bool,
+    ) -> Gathered<D> {
+        self.local().gather(grid, p, xp, v, v_old, affine, gradient)
+    }
+
+    #[inline(always)]
+    fn offset(&self, grid: &Grid<D>, p: usize, s: usize, node: usize, xp: &Vector<D>) -> Vector<D> {
+        self.local().offset(grid, p, s, node, xp)
+    }
+}
+
+impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
+    type Local<'a>
+        = Self
+    where
+        Self: 'a;
+
+    #[inline(always)]
+    fn local(&self) -> Self {
+        *self
+    }
+
     #[inline(always)]
     fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
         self.visit(p, None, |s, node, _| f(s, node));

@@ -364,27 +364,40 @@ where
     let flip = plan.flip > 0.0;
     let update_deformation = finish.is_some();
     let apic_inertia = plan.inverse_inertia.is_some();
+    // Slices and plain values captured by value, as in particle to grid (2D MLS, one thread:
+    // 29.2 -> 27.7 ns per particle-step; a copy per task as there changed nothing here).
+    let stencils = stencils.local();
+    let (position, material, velocity, deformation_gradient) = (
+        &ps.position[..],
+        &ps.material[..],
+        &ps.velocity[..],
+        &ps.deformation_gradient[..],
+    );
+    let one_field = match fields {
+        Fields::One(n) => Some((&n.velocity[..], &n.velocity_old[..])),
+        Fields::PerBody(..) => None,
+    };
+    let any_rigid = rigid.iter().any(Option::is_some);
     let gather = crate::cpu::inlined(
         #[inline(always)]
-        |p: usize, u: &mut ParticleUpdate<D>| {
-            let xp = ps.position[p];
-            if let Some(v) = rigid.get(ps.material[p] as usize).copied().flatten() {
+        move |p: usize, u: &mut ParticleUpdate<D>| {
+            let xp = position[p];
+            let rigid_velocity = match any_rigid {
+                true => rigid.get(material[p] as usize).copied().flatten(),
+                false => None,
+            };
+            if let Some(v) = rigid_velocity {
                 u.position = xp + dt * v;
                 u.velocity = v;
                 u.affine = Matrix::zeros();
-                u.deformation_gradient = ps.deformation_gradient[p];
+                u.deformation_gradient = deformation_gradient[p];
                 return;
             }
-            let nodes = fields.of(p);
-            let g = stencils.gather(
-                grid,
-                p,
-                &xp,
-                &nodes.velocity,
-                flip.then_some(&nodes.velocity_old[..]),
-                apic_inertia,
-                !MLS,
-            );
+            let (v, v_old) = one_field.unwrap_or_else(|| {
+                let nodes = fields.of(p);
+                (&nodes.velocity, &nodes.velocity_old)
+            });
+            let g = stencils.gather(grid, p, &xp, v, flip.then_some(v_old), apic_inertia, !MLS);
             let (v_pic, dv) = (g.velocity, g.velocity_change);
             // `C_p = B_p / D` when the inertia is constant; under MLS it is the velocity gradient.
             let affine = plan.inverse_inertia.map(|inv| g.affine * inv);
@@ -394,7 +407,7 @@ where
             };
             u.position = xp + dt * v_pic;
             u.velocity = if flip {
-                (1.0 - plan.flip) * v_pic + plan.flip * (ps.velocity[p] + dv)
+                (1.0 - plan.flip) * v_pic + plan.flip * (velocity[p] + dv)
             } else {
                 v_pic
             };
@@ -403,7 +416,7 @@ where
             }
             if update_deformation {
                 u.deformation_gradient =
-                    (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
+                    (Matrix::<D>::identity() + dt * l) * deformation_gradient[p];
             }
         },
     );

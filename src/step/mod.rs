@@ -441,8 +441,9 @@ impl<const D: usize> Sim<D> {
         work.times.forces_and_vc += lap(&mut clock);
 
         // 3. Particle to grid (one field, or one per body under contact).
-        let velocity = |p: usize| ps.velocity[p];
-        let affine_map = plan.apic.then_some(|p: usize| ps.affine[p]);
+        let (v, c) = (&ps.velocity[..], &ps.affine[..]);
+        let velocity = move |p: usize| v[p];
+        let affine_map = plan.apic.then_some(move |p: usize| c[p]);
         let forces = Forces {
             gravity: self.options.gravity,
             body,
@@ -592,7 +593,8 @@ impl<const D: usize> Sim<D> {
                     l.momentum[n] = Vector::zeros();
                 }
             }
-            let velocity = |p: usize| new.velocity[p];
+            let v = &new.velocity[..];
+            let velocity = move |p: usize| v[p];
             particle_to_grid(
                 grid,
                 ps,
@@ -600,7 +602,10 @@ impl<const D: usize> Sim<D> {
                 stencils,
                 stored,
                 velocity,
-                plan.apic.then_some(|p: usize| new.affine[p]),
+                plan.apic.then_some({
+                    let c = &new.affine[..];
+                    move |p: usize| c[p]
+                }),
                 None,
                 None,
                 &mut work.nodes,

@@ -44,14 +44,14 @@ pub fn particle_to_grid<const D: usize, S, A>(
     bins: &Bins<D>,
     stencils: &S,
     lumping: Option<&Stencils<D>>,
-    velocity: impl Fn(usize) -> Vector<D> + Sync,
+    velocity: impl Fn(usize) -> Vector<D> + Sync + Copy,
     affine: Option<A>,
     forces: Option<Forces<D>>,
     body: Option<u32>,
     nodes: &mut GridNodes<D>,
 ) where
     S: StencilView<D>,
-    A: Fn(usize) -> Matrix<D> + Sync,
+    A: Fn(usize) -> Matrix<D> + Sync + Copy,
 {
     let vc = forces.and_then(|f| f.vc);
     let out = NodeScatter::new(nodes);
@@ -64,25 +64,40 @@ pub fn particle_to_grid<const D: usize, S, A>(
     // which adds the body force to the momentum).
     let with_body_force = mls.is_none()
         && forces.is_some_and(|f| f.body.is_some() || f.gravity != Vector::<D>::zeros());
+    // The particle arrays as slices, the stencils as their `Local` view, and the closure by
+    // value (`move`, copied into each task below): the compiler then keeps them in registers
+    // instead of reloading them after every store to the nodes, which it cannot prove leaves
+    // them alone. 2D MLS, one thread: 20.6 -> 17.8 ns per particle-step (18.7 without the copy
+    // per task).
+    let (material, mass, position, stress) = (
+        &ps.material[..],
+        &ps.mass[..],
+        &ps.position[..],
+        &ps.stress[..],
+    );
+    let (deformation_gradient, reference_volume) =
+        (&ps.deformation_gradient[..], &ps.reference_volume[..]);
+    let stencils = stencils.local();
     let scatter = crate::cpu::inlined(
         #[inline(always)]
-        |p: usize| {
-            if body.is_some_and(|b| ps.material[p] != b) {
+        move |p: usize| {
+            if body.is_some_and(|b| material[p] != b) {
                 return;
             }
             let lumping = lumping
                 .and_then(|l| l.lumping_of(p))
                 .filter(|_| with_lumping);
-            let m = ps.mass[p];
+            let m = mass[p];
             let v = velocity(p);
             let c = affine.as_ref().map(|a| a(p));
-            let xp = ps.position[p];
+            let xp = position[p];
             let mut force = forces.map(|f| {
                 let b = match f.body {
                     Some(b) => f.gravity + b[p],
                     None => f.gravity,
                 };
-                (-ps.volume(p) * ps.stress[p], b)
+                let volume = crate::determinant(&deformation_gradient[p]) * reference_volume[p];
+                (-volume * stress[p], b)
             });
             // Momentum of the particle and its affine part, `m v + m C (x_I − x_p)`.
             let mut mv = m * v;
@@ -168,6 +183,9 @@ pub fn particle_to_grid<const D: usize, S, A>(
             crate::cpu::wide(
                 #[inline(always)]
                 || {
+                    // A copy in this task (see above), not a reference to the shared one.
+                    #[allow(clippy::redundant_locals)]
+                    let scatter = scatter;
                     for &p in &bins.order[range] {
                         scatter(p as usize);
                     }
