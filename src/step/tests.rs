@@ -633,8 +633,9 @@ fn results_do_not_depend_on_the_thread_count() {
 
 /// Results do not depend on the instruction set: the particle loops compiled for AVX2 and FMA
 /// (`cpu::wide`) give the same particle data bit for bit as the baseline code, for B-splines
-/// with APIC and MLS (the factored scatter and gather, the shape factors, the constitutive
-/// update), elastic and with Drucker–Prager, in 2D and 3D. On a processor without AVX2 both runs
+/// with APIC, MLS and PIC/FLIP (the factored scatter and gather, the 3D gather in AVX2
+/// registers, the shape factors, the constitutive update), elastic and with Drucker–Prager, in
+/// 2D and 3D. On a processor without AVX2 both runs
 /// take the baseline and the test says so.
 #[test]
 fn results_do_not_depend_on_the_instruction_set() {
@@ -669,6 +670,8 @@ fn results_do_not_depend_on_the_instruction_set() {
         (Transfer::Apic, false),
         (Transfer::Mls, false),
         (Transfer::Apic, true),
+        // The gather with the old velocities and the gradient sums (3D: `avx2::gather_3d`).
+        (Transfer::PicFlip { flip: 0.95 }, false),
     ] {
         let (base, wide) = (
             run::<2>(true, transfer, plastic),
