@@ -13,7 +13,7 @@
 //! * `Free` does nothing; the ghost layers act as ordinary nodes.
 
 use crate::error::{check_finite, Error, Result};
-use crate::grid::{Grid, GridNodes};
+use crate::grid::{DomainBox, Grid, GridNodes};
 use crate::Vector;
 
 /// The condition on one face of the grid.
@@ -222,8 +222,7 @@ impl<const D: usize> Walls<D> {
     /// its face: the grid velocity has no normal component into the wall on the face, but a
     /// point near it also feels the nodes above, and round-off or that blend may carry it a
     /// hair past the face. Free faces leave points alone (leaving the grid is then an error).
-    pub fn clamp_to_walls(&self, grid: &Grid<D>, x: &mut Vector<D>) {
-        let up = grid.upper();
+    pub fn clamp_to_walls(&self, domain: &DomainBox<D>, x: &mut Vector<D>) {
         for axis in 0..D {
             for side in [Side::Low, Side::High] {
                 if self.faces[axis][side as usize] == Boundary::Free {
@@ -231,8 +230,8 @@ impl<const D: usize> Walls<D> {
                 }
                 let c = &mut x[axis];
                 match side {
-                    Side::Low => *c = c.max(grid.origin[axis]),
-                    Side::High => *c = c.min(up[axis]),
+                    Side::Low => *c = c.max(domain.lower[axis]),
+                    Side::High => *c = c.min(domain.upper[axis]),
                 }
             }
         }

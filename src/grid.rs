@@ -102,8 +102,15 @@ impl<const D: usize> Grid<D> {
 
     /// Whether `x` lies inside the closed domain box.
     pub fn contains(&self, x: &Vector<D>) -> bool {
-        let up = self.upper();
-        (0..D).all(|a| x[a] >= self.origin[a] && x[a] <= up[a])
+        self.domain().contains(x)
+    }
+
+    /// The closed domain box, with its upper corner computed once (for tests per particle).
+    pub fn domain(&self) -> DomainBox<D> {
+        DomainBox {
+            lower: self.origin,
+            upper: self.upper(),
+        }
     }
 
     /// Linear storage index of the node with integer index `i` (each in `-ghost ..= cells+ghost`).
@@ -364,6 +371,21 @@ impl<const D: usize> GridNodes<D> {
 /// coloured particle-to-grid map (`step::bins`): the caller guarantees that no two threads write
 /// the same node. Nodes written are marked touched; [`GridNodes::collect_touched`] lists them
 /// afterwards. The slots of nodes listed before the scatter (by VC) stay readable.
+/// The closed box `[lower, upper]` of a grid's domain ([`Grid::domain`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DomainBox<const D: usize> {
+    pub lower: Vector<D>,
+    pub upper: Vector<D>,
+}
+
+impl<const D: usize> DomainBox<D> {
+    /// Whether `x` lies inside the box (its faces included).
+    #[inline]
+    pub fn contains(&self, x: &Vector<D>) -> bool {
+        (0..D).all(|a| x[a] >= self.lower[a] && x[a] <= self.upper[a])
+    }
+}
+
 #[derive(Clone, Copy)]
 pub struct NodeScatter<'a, const D: usize> {
     pub mass: *mut f64,

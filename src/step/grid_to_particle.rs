@@ -2,7 +2,7 @@
 
 use super::TransferPlan;
 use crate::error::ErrorKind;
-use crate::grid::{Grid, GridNodes, SharedSlice};
+use crate::grid::{DomainBox, Grid, GridNodes, SharedSlice};
 use crate::material::PlasticState;
 use crate::particles::Particles;
 use crate::shape::StencilView;
@@ -169,24 +169,24 @@ impl<const D: usize> ParticleUpdate<D> {
     /// [`ParticleUpdate::check`], from one sum instead of a test per value (a sum that is finite
     /// has no NaN or infinite term; when the sum is not finite, the full check decides).
     #[inline(always)]
-    pub fn is_admissible(&self, grid: &Grid<D>, j: f64) -> bool {
+    pub fn is_admissible(&self, domain: &DomainBox<D>, j: f64) -> bool {
         let sum = self.position.sum()
             + self.velocity.sum()
             + self.deformation_gradient.sum()
             + self.stress.sum()
             + self.affine.sum()
             + self.pressure;
-        if sum.is_finite() && j > 0.0 && grid.contains(&self.position) {
+        if sum.is_finite() && j > 0.0 && domain.contains(&self.position) {
             true
         } else {
-            self.check(grid).is_ok()
+            self.check(domain).is_ok()
         }
     }
 
     /// Whether the new state is admissible; if not, the kind of failure and what was wrong.
     #[cold]
     #[inline(never)]
-    pub fn check(&self, grid: &Grid<D>) -> Result<(), (ErrorKind, String)> {
+    pub fn check(&self, domain: &DomainBox<D>) -> Result<(), (ErrorKind, String)> {
         let finite = self.position.iter().all(|c| c.is_finite())
             && self.velocity.iter().all(|c| c.is_finite())
             && self.deformation_gradient.iter().all(|c| c.is_finite())
@@ -203,7 +203,7 @@ impl<const D: usize> ParticleUpdate<D> {
                 format!("is inverted (det F = {j:e})"),
             ));
         }
-        if !grid.contains(&self.position) {
+        if !domain.contains(&self.position) {
             return Err((
                 ErrorKind::OutsideGrid,
                 format!("would leave the grid (x = {:?})", self.position.as_slice()),

@@ -555,7 +555,7 @@ impl<const D: usize> Sim<D> {
         //    from F, history models by return mapping from their state and the increment
         //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
         let finish = ConstitutiveUpdate {
-            grid,
+            domain: grid.domain(),
             particles: ps,
             materials: &self.materials,
             walls: &self.options.walls,
@@ -687,7 +687,7 @@ impl<const D: usize> Sim<D> {
             .map(|(p, _)| p);
         work.admissible = admissible;
         if let Some(p) = bad {
-            let (kind, what) = new.get(p).check(grid).unwrap_err();
+            let (kind, what) = new.get(p).check(&grid.domain()).unwrap_err();
             let id = ps.id[p];
             let message = format!(
                 "step {} (t = {:e}, dt = {dt:e}) rejected: particle {id} {what}; the simulation keeps its last good state",
@@ -699,8 +699,9 @@ impl<const D: usize> Sim<D> {
             return Err(Error::new(kind, message));
         }
         // Boundary points on a wall stay on it (round-off may not push them out).
+        let domain = grid.domain();
         for u in boundary_updates.iter_mut() {
-            self.options.walls.clamp_to_walls(grid, &mut u.position);
+            self.options.walls.clamp_to_walls(&domain, &mut u.position);
         }
         let bad = boundary_updates.iter().enumerate().find_map(|(b, u)| {
             let what = if !u
@@ -712,7 +713,7 @@ impl<const D: usize> Sim<D> {
                 "has a non-finite value"
             } else if crate::determinant(&u.deformation_gradient) <= 0.0 {
                 "is inverted"
-            } else if !grid.contains(&u.position) {
+            } else if !domain.contains(&u.position) {
                 "would leave the grid"
             } else {
                 return None;
@@ -778,7 +779,7 @@ impl<const D: usize> Sim<D> {
 /// models from `F`, history models by return mapping from their state and the increment
 /// `ΔF = F^{n+1} (F^n)⁻¹`; particles kept inside the walls; the checks.
 struct ConstitutiveUpdate<'a, const D: usize> {
-    grid: &'a crate::grid::Grid<D>,
+    domain: crate::grid::DomainBox<D>,
     particles: &'a crate::particles::Particles<D>,
     materials: &'a [crate::material::Material],
     walls: &'a crate::boundary::Walls<D>,
@@ -887,9 +888,9 @@ impl<const D: usize> ConstitutiveUpdate<'_, D> {
         wave_speed: impl FnOnce() -> f64,
     ) -> Option<f64> {
         if self.any_wall {
-            self.walls.clamp_to_walls(self.grid, &mut u.position);
+            self.walls.clamp_to_walls(&self.domain, &mut u.position);
         }
-        u.is_admissible(self.grid, j)
+        u.is_admissible(&self.domain, j)
             .then(|| wave_speed() + u.velocity.norm())
     }
 }

@@ -707,7 +707,7 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
         sim.add_particles(rubber, &x, &vec![1e-3; n], None).unwrap();
         let ps = sim.particles.clone();
         let finish = super::ConstitutiveUpdate {
-            grid: &sim.grid,
+            domain: sim.grid.domain(),
             particles: &ps,
             materials: &sim.materials,
             walls: &sim.options.walls,
