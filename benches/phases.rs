@@ -129,7 +129,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         mls: None,
     };
     g.bench_function(BenchmarkId::new("p2g", "bspline2 apic"), |b| {
-        b.iter(|| p2g(&grid, &ps, &bins, &factors, forces, &mut nodes))
+        b.iter(|| p2g(&grid, &ps, &bins, &factors.local(), forces, &mut nodes))
     });
     // MLS: the force on the affine momentum, mass and momentum only.
     let inverse_inertia = 4.0 / (grid.cell_size * grid.cell_size);
@@ -138,14 +138,14 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         ..forces
     };
     g.bench_function(BenchmarkId::new("p2g", "bspline2 mls"), |b| {
-        b.iter(|| p2g(&grid, &ps, &bins, &factors, mls_forces, &mut nodes))
+        b.iter(|| p2g(&grid, &ps, &bins, &factors.local(), mls_forces, &mut nodes))
     });
     let walls = Walls::<D>::default();
     g.bench_function("grid_update", |b| {
         b.iter(|| grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0))
     });
     // The node velocities the gathers read (also when the benchmarks above are filtered out).
-    p2g(&grid, &ps, &bins, &factors, forces, &mut nodes);
+    p2g(&grid, &ps, &bins, &factors.local(), forces, &mut nodes);
     grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0);
     let (mut new, mut admissible) = (NewState::<D>::default(), Vec::new());
     for (name, mls) in [("bspline2 apic", false), ("bspline2 mls", true)] {
@@ -160,7 +160,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 grid_to_particle(
                     &grid,
                     &ps,
-                    &factors,
+                    &factors.local(),
                     Fields::One(&nodes),
                     &[None],
                     plan,

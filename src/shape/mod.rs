@@ -13,7 +13,9 @@ mod stencil;
 pub use bspline::{BSpline, BSplineOrder};
 pub use monomials::Monomials;
 pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
-pub use stencil::{Gathered, ScatterInput, StencilNode, StencilView, Stencils, TensorStencils};
+pub use stencil::{
+    Gathered, ScatterInput, StencilNode, StencilView, Stencils, TensorStencils, TensorView,
+};
 
 use crate::error::Result;
 use crate::grid::Grid;

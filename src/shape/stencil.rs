@@ -637,11 +637,11 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     }
 }
 
-impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
-    type Local<'a> = TensorView<'a, D, W>;
-
+impl<const D: usize, const W: usize> TensorStencils<D, W> {
+    /// The stencils as a [`StencilView`]: slices and scalars that a phase copies into each
+    /// parallel task ([`StencilView::Local`]).
     #[inline(always)]
-    fn local(&self) -> TensorView<'_, D, W> {
+    pub fn local(&self) -> TensorView<'_, D, W> {
         TensorView {
             strides: self.strides,
             origin: self.origin,
@@ -651,47 +651,6 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorStencils<D, W> {
             values: &self.values,
             derivatives: &self.derivatives,
         }
-    }
-
-    #[inline(always)]
-    fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
-        self.local().for_each(p, f)
-    }
-
-    #[inline(always)]
-    fn for_each_with_offset(
-        &self,
-        grid: &Grid<D>,
-        p: usize,
-        xp: Option<&Vector<D>>,
-        f: impl FnMut(usize, StencilNode<D>, Vector<D>),
-    ) {
-        self.local().for_each_with_offset(grid, p, xp, f)
-    }
-
-    #[inline(always)]
-    unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
-        self.local().scatter(p, input, out)
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn gather(
-        &self,
-        grid: &Grid<D>,
-        p: usize,
-        xp: &Vector<D>,
-        v: &[Vector<D>],
-        v_old: Option<&[Vector<D>]>,
-        affine: bool,
-        gradient: bool,
-    ) -> Gathered<D> {
-        self.local().gather(grid, p, xp, v, v_old, affine, gradient)
-    }
-
-    #[inline(always)]
-    fn offset(&self, grid: &Grid<D>, p: usize, s: usize, node: usize, xp: &Vector<D>) -> Vector<D> {
-        self.local().offset(grid, p, s, node, xp)
     }
 }
 

@@ -333,6 +333,7 @@ fn check_stencil_box<const D: usize>(shape: Shape) {
         ($w:literal) => {{
             let mut t = TensorStencils::<D, $w>::default();
             t.compute(&BSpline::new(order), &grid, &pts);
+            let t = t.local();
             check(&|p, f| {
                 t.for_each(p, |s, node| {
                     f(s, node, t.offset(&grid, p, s, node.node, &pts[p]))

@@ -322,7 +322,7 @@ impl<const D: usize> Sim<D> {
                 stencils.first_node(p)
             });
         self.work.times.bins += lap(&mut clock);
-        let result = self.phases(dt, &stencils, None);
+        let result = self.phases(dt, &stencils.local(), None);
         *storage(&mut self.work) = stencils;
         result
     }
