@@ -177,6 +177,143 @@ impl BSpline {
     }
 }
 
+impl BSpline {
+    /// [`BSpline::factors_into`] for four positions at once, as the lanes of AVX2 registers:
+    /// the same operations in the same order for each, so the same bits. Returns false, having
+    /// written nothing, when some coordinate is not finite or lies 2^50 cells or more from the
+    /// origin (where the scalar floor saturates).
+    ///
+    /// # Safety
+    /// The processor has AVX2 (the caller runs this inside [`crate::cpu::wide`]).
+    #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    pub(crate) unsafe fn factors_4<const D: usize, const W: usize>(
+        &self,
+        grid: &Grid<D>,
+        x: &[Vector<D>],
+        first: &mut [[i64; D]],
+        values: &mut [[[f64; W]; D]],
+        derivatives: Option<&mut [[[f64; W]; D]]>,
+    ) -> bool {
+        use std::arch::x86_64::*;
+        assert!(x.len() == 4 && first.len() == 4 && values.len() == 4 && W == self.order.width());
+        // Functions, not closures: a closure is not inlined by force, and the intrinsics in it
+        // would become calls.
+        #[inline(always)]
+        unsafe fn set(x: f64) -> __m256d {
+            _mm256_set1_pd(x)
+        }
+        #[inline(always)]
+        unsafe fn mul(a: __m256d, b: __m256d) -> __m256d {
+            _mm256_mul_pd(a, b)
+        }
+        #[inline(always)]
+        unsafe fn sub(a: __m256d, b: __m256d) -> __m256d {
+            _mm256_sub_pd(a, b)
+        }
+        #[inline(always)]
+        unsafe fn add(a: __m256d, b: __m256d) -> __m256d {
+            _mm256_add_pd(a, b)
+        }
+        /// `−a` (the sign flipped, as the scalar negation).
+        #[inline(always)]
+        unsafe fn negate(a: __m256d) -> __m256d {
+            _mm256_xor_pd(a, set(-0.0))
+        }
+        #[inline(always)]
+        unsafe fn floor(a: __m256d) -> __m256d {
+            _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a)
+        }
+        /// The cubic's inner branch at distance `r`: value and derivative.
+        #[inline(always)]
+        unsafe fn inner(r: __m256d) -> (__m256d, __m256d) {
+            let value = add(
+                sub(mul(mul(mul(set(0.5), r), r), r), mul(r, r)),
+                set(2.0 / 3.0),
+            );
+            let derivative = sub(mul(mul(set(1.5), r), r), mul(set(2.0), r));
+            (value, derivative)
+        }
+        // Cell units, `(x − origin) / h`, per axis.
+        let mut xi = [set(0.0); D];
+        let mut inside = true;
+        for a in 0..D {
+            let xa = _mm256_set_pd(x[3][a], x[2][a], x[1][a], x[0][a]);
+            xi[a] = _mm256_div_pd(sub(xa, set(grid.origin[a])), set(grid.cell_size));
+            let magnitude = _mm256_andnot_pd(set(-0.0), xi[a]);
+            let limit = set((1u64 << 50) as f64);
+            inside &= _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(magnitude, limit)) == 0b1111;
+        }
+        if !inside {
+            return false;
+        }
+        let inv_h = set(1.0 / grid.cell_size);
+        let mut w = [[set(0.0); W]; D];
+        let mut dw = [[set(0.0); W]; D];
+        for a in 0..D {
+            // The first node, an integer in floating point (exact), and `t = xi − first`.
+            let f = match self.order {
+                BSplineOrder::Linear => floor(xi[a]),
+                BSplineOrder::Quadratic => floor(sub(xi[a], set(0.5))),
+                BSplineOrder::Cubic => sub(floor(xi[a]), set(1.0)),
+            };
+            let t = sub(xi[a], f);
+            let lanes: [f64; 4] = std::mem::transmute(f);
+            for (k, first) in first.iter_mut().enumerate() {
+                first[a] = lanes[k] as i64;
+            }
+            let (w, dw) = (&mut w[a], &mut dw[a]);
+            match self.order {
+                BSplineOrder::Linear => {
+                    (w[0], w[1]) = (sub(set(1.0), t), t);
+                    (dw[0], dw[1]) = (set(-1.0), set(1.0));
+                }
+                BSplineOrder::Quadratic => {
+                    let (u, c, l) = (sub(set(1.5), t), sub(t, set(1.0)), sub(t, set(0.5)));
+                    w[0] = mul(mul(set(0.5), u), u);
+                    w[1] = sub(set(0.75), mul(c, c));
+                    w[2] = mul(mul(set(0.5), l), l);
+                    (dw[0], dw[1], dw[2]) = (negate(u), mul(set(-2.0), c), l);
+                }
+                BSplineOrder::Cubic => {
+                    let (u, r1, r2, l) = (
+                        sub(set(2.0), t),
+                        sub(t, set(1.0)),
+                        sub(set(2.0), t),
+                        sub(t, set(1.0)),
+                    );
+                    let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
+                    w[0] = _mm256_div_pd(mul(mul(u, u), u), set(6.0));
+                    (w[1], w[2]) = (w1, w2);
+                    w[3] = _mm256_div_pd(mul(mul(l, l), l), set(6.0));
+                    dw[0] = mul(mul(set(-0.5), u), u);
+                    (dw[1], dw[2]) = (d1, negate(d2));
+                    dw[3] = mul(mul(set(0.5), l), l);
+                }
+            }
+            for d in dw.iter_mut() {
+                *d = mul(*d, inv_h);
+            }
+        }
+        let store = |out: &mut [[[f64; W]; D]], lanes: &[[__m256d; W]; D]| {
+            for a in 0..D {
+                for k in 0..W {
+                    let l: [f64; 4] = std::mem::transmute(lanes[a][k]);
+                    for (q, out) in out.iter_mut().enumerate() {
+                        out[a][k] = l[q];
+                    }
+                }
+            }
+        };
+        store(values, &w);
+        if let Some(derivatives) = derivatives {
+            store(derivatives, &dw);
+        }
+        true
+    }
+}
+
 /// The 1D factors along one axis at `t` cells from the first stencil node: the kernel at
 /// `t − k` in closed form (the branches of `BSplineOrder::kernel` are known from the range of
 /// `t`) into `w`, its derivative times `inv_h` into `dw`.

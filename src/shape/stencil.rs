@@ -386,15 +386,41 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             self.derivatives.clear();
             None
         };
-        let one = crate::cpu::inlined(
+        // A chunk of particles: four at a time as vector lanes (`BSpline::factors_4`) when the
+        // processor has AVX2, the rest one by one; the same bits either way.
+        let fill = crate::cpu::inlined(
             #[inline(always)]
-            |first: &mut [i64; D],
-             base: &mut usize,
-             w: &mut [[f64; W]; D],
-             xp: &Vector<D>,
-             dw: Option<&mut [[f64; W]; D]>| {
-                shape.factors_into(grid, xp, first, w, dw);
-                *base = grid.node_index(*first);
+            |first: &mut [[i64; D]],
+             base: &mut [usize],
+             w: &mut [[[f64; W]; D]],
+             x: &[Vector<D>],
+             mut dw: Option<&mut [[[f64; W]; D]]>| {
+                let n = x.len();
+                let mut i = 0;
+                while i < n {
+                    let lanes = i + 4 <= n && crate::cpu::has_avx2();
+                    // SAFETY: the processor has AVX2 (`has_avx2`).
+                    #[cfg(target_arch = "x86_64")]
+                    let lanes = lanes
+                        && unsafe {
+                            shape.factors_4(
+                                grid,
+                                &x[i..i + 4],
+                                &mut first[i..i + 4],
+                                &mut w[i..i + 4],
+                                dw.as_deref_mut().map(|d| &mut d[i..i + 4]),
+                            )
+                        };
+                    let end = if lanes { i + 4 } else { i + 1 };
+                    for q in i..end {
+                        if !lanes {
+                            let dw = dw.as_deref_mut().map(|d| &mut d[q]);
+                            shape.factors_into(grid, &x[q], &mut first[q], &mut w[q], dw);
+                        }
+                        base[q] = grid.node_index(first[q]);
+                    }
+                    i = end;
+                }
             },
         );
         let chunks = self
@@ -408,24 +434,14 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                 |((((first, base), w), x), dw)| {
                     crate::cpu::wide(
                         #[inline(always)]
-                        || {
-                            for ((((f, b), w), xp), dw) in
-                                first.iter_mut().zip(base).zip(w).zip(x).zip(dw)
-                            {
-                                one(f, b, w, xp, Some(dw));
-                            }
-                        },
+                        || fill(first, base, w, x, Some(dw)),
                     )
                 },
             ),
             None => chunks.for_each(|(((first, base), w), x)| {
                 crate::cpu::wide(
                     #[inline(always)]
-                    || {
-                        for (((f, b), w), xp) in first.iter_mut().zip(base).zip(w).zip(x) {
-                            one(f, b, w, xp, None);
-                        }
-                    },
+                    || fill(first, base, w, x, None),
                 )
             }),
         }

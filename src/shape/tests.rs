@@ -363,3 +363,73 @@ fn stencils_lie_in_their_box_and_factors_give_the_stored_bits() {
         check_stencil_box::<3>(shape);
     }
 }
+
+/// Four positions as vector lanes (`BSpline::factors_4`) give the bits of one at a time
+/// (`BSpline::factors_into`): first node, values and derivatives, for every order in 2D and 3D,
+/// at random points, on nodes and cell centres, on and next to the faces (including the negative
+/// coordinates of the grid's origin); a coordinate that is not finite or too far out is refused
+/// with nothing written.
+#[test]
+fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
+    fn check<const D: usize, const W: usize>(order: BSplineOrder) {
+        if !crate::cpu::has_avx2() {
+            eprintln!("no AVX2 here: the lanes are not taken");
+            return;
+        }
+        let shape = BSpline::new(order);
+        let grid = grid_for::<D>(&shape);
+        let mut rng = TestRng::new(11);
+        let mut points = sample_points(&grid, &mut rng);
+        // Nodes, cell centres and the points a rounding away from them.
+        for k in 0..8 {
+            let t = 0.5 * k as f64;
+            for e in [0.0, 1e-12, -1e-12] {
+                points.push(Vector::<D>::from_fn(|a, _| {
+                    grid.origin[a] + (t + e + a as f64 * 0.5) * grid.cell_size
+                }));
+            }
+        }
+        for x in points.chunks_exact(4) {
+            let mut first = [[0i64; D]; 4];
+            let mut values = [[[0.0; W]; D]; 4];
+            let mut derivatives = [[[0.0; W]; D]; 4];
+            // SAFETY: the processor has AVX2.
+            let taken = unsafe {
+                crate::cpu::wide(|| {
+                    shape.factors_4(&grid, x, &mut first, &mut values, Some(&mut derivatives))
+                })
+            };
+            assert!(taken);
+            for (q, xq) in x.iter().enumerate() {
+                let (mut f, mut w, mut dw) = ([0i64; D], [[0.0; W]; D], [[0.0; W]; D]);
+                shape.factors_into(&grid, xq, &mut f, &mut w, Some(&mut dw));
+                assert_eq!(first[q], f, "{order:?} first node at {xq:?}");
+                let bits = |v: &[[f64; W]; D]| v.map(|r| r.map(f64::to_bits));
+                assert_eq!(bits(&values[q]), bits(&w), "{order:?} values at {xq:?}");
+                assert_eq!(
+                    bits(&derivatives[q]),
+                    bits(&dw),
+                    "{order:?} derivatives at {xq:?}"
+                );
+            }
+        }
+        for bad in [f64::NAN, f64::INFINITY, 1e300] {
+            let mut x = [Vector::<D>::from_element(0.1); 4];
+            x[2][D - 1] = bad;
+            let mut first = [[7i64; D]; 4];
+            let mut values = [[[7.0; W]; D]; 4];
+            // SAFETY: as above.
+            let taken = unsafe {
+                crate::cpu::wide(|| shape.factors_4(&grid, &x, &mut first, &mut values, None))
+            };
+            assert!(!taken, "{order:?} took {bad}");
+            assert_eq!((first, values), ([[7i64; D]; 4], [[[7.0; W]; D]; 4]));
+        }
+    }
+    check::<2, 2>(BSplineOrder::Linear);
+    check::<2, 3>(BSplineOrder::Quadratic);
+    check::<2, 4>(BSplineOrder::Cubic);
+    check::<3, 2>(BSplineOrder::Linear);
+    check::<3, 3>(BSplineOrder::Quadratic);
+    check::<3, 4>(BSplineOrder::Cubic);
+}
