@@ -13,6 +13,7 @@
 use super::bspline::{tensor_product, BSpline};
 use super::ShapeFunction;
 use crate::grid::{scatter_add, Grid, NodeScatter};
+use crate::step::BlockLayout;
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
@@ -307,6 +308,8 @@ pub struct TensorStencils<const D: usize, const W: usize> {
     base: Vec<usize>,
     values: Vec<[[f64; W]; D]>,
     derivatives: Vec<[[f64; W]; D]>,
+    /// Grid block of each particle ([`BlockLayout::key`] of its first node), for the bins.
+    keys: Vec<u32>,
 }
 
 /// A particle's stencil as a transfer reads it ([`TensorView::factors`]).
@@ -339,6 +342,7 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
             base: Vec::new(),
             values: Vec::new(),
             derivatives: Vec::new(),
+            keys: Vec::new(),
         }
     }
 }
@@ -376,6 +380,8 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.first.resize(n, [0; D]);
         self.base.resize(n, 0);
         self.values.resize(n, [[0.0; W]; D]);
+        self.keys.resize(n, 0);
+        let layout = BlockLayout::new(W, grid);
         // First node, its storage index and the values; the factors for the derivatives. In
         // chunks, each compiled for the processor's vector instructions (`cpu::wide`).
         const CHUNK: usize = 1024;
@@ -392,6 +398,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             #[inline(always)]
             |first: &mut [[i64; D]],
              base: &mut [usize],
+             keys: &mut [u32],
              w: &mut [[[f64; W]; D]],
              x: &[Vector<D>],
              mut dw: Option<&mut [[[f64; W]; D]]>| {
@@ -418,6 +425,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                             shape.factors_into(grid, &x[q], &mut first[q], &mut w[q], dw);
                         }
                         base[q] = grid.node_index(first[q]);
+                        keys[q] = layout.key(&first[q]);
                     }
                     i = end;
                 }
@@ -427,21 +435,22 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             .first
             .par_chunks_mut(CHUNK)
             .zip(self.base.par_chunks_mut(CHUNK))
+            .zip(self.keys.par_chunks_mut(CHUNK))
             .zip(self.values.par_chunks_mut(CHUNK))
             .zip(x.par_chunks(CHUNK));
         match derivatives {
             Some(derivatives) => chunks.zip(derivatives.par_chunks_mut(CHUNK)).for_each(
-                |((((first, base), w), x), dw)| {
+                |(((((first, base), keys), w), x), dw)| {
                     crate::cpu::wide(
                         #[inline(always)]
-                        || fill(first, base, w, x, Some(dw)),
+                        || fill(first, base, keys, w, x, Some(dw)),
                     )
                 },
             ),
-            None => chunks.for_each(|(((first, base), w), x)| {
+            None => chunks.for_each(|((((first, base), keys), w), x)| {
                 crate::cpu::wide(
                     #[inline(always)]
-                    || fill(first, base, w, x, None),
+                    || fill(first, base, keys, w, x, None),
                 )
             }),
         }
@@ -453,10 +462,17 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.first[p]
     }
 
+    /// Each particle's grid block under [`BlockLayout::new`]`(W, grid)`, found with the factors
+    /// (for [`Bins::compute_from_keys`](crate::step::Bins::compute_from_keys)).
+    pub fn block_keys(&self) -> &[u32] {
+        &self.keys
+    }
+
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         self.first.capacity() * 8 * D
             + self.base.capacity() * std::mem::size_of::<usize>()
+            + self.keys.capacity() * 4
             + (self.values.capacity() + self.derivatives.capacity()) * 8 * D * W
     }
 }

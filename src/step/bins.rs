@@ -36,6 +36,49 @@ const LONG_BLOCK: usize = 128;
 /// stored anew in that order (`Bins::is_scattered`).
 const SORTED_RUN: usize = 512;
 
+/// The blocks of a grid for stencils `width` nodes per axis: their sides (powers of two, so that
+/// a particle's block is a shift of its first node's index) and how many there are per axis.
+#[derive(Debug, Clone, Copy)]
+pub struct BlockLayout<const D: usize> {
+    /// Nodes per block side, per axis.
+    block: [usize; D],
+    /// Blocks per axis (covering every stored node).
+    blocks: [usize; D],
+    shift: [u32; D],
+    dims: [usize; D],
+    ghost: i64,
+}
+
+impl<const D: usize> BlockLayout<D> {
+    pub fn new(width: usize, grid: &Grid<D>) -> Self {
+        let side = (width.max(2) - 1).max(MIN_BLOCK).next_power_of_two();
+        let long = side.max(LONG_BLOCK);
+        let block: [usize; D] = std::array::from_fn(|a| if a == 0 { long } else { side });
+        let dims = grid.dims();
+        let blocks: [usize; D] = std::array::from_fn(|a| dims[a].div_ceil(block[a]));
+        assert!(blocks.iter().product::<usize>() < u32::MAX as usize);
+        BlockLayout {
+            block,
+            blocks,
+            shift: block.map(|b| b.trailing_zeros()),
+            dims,
+            ghost: grid.ghost_layers() as i64,
+        }
+    }
+
+    /// The block of a particle whose stencil starts at the integer node index `first` (clamped
+    /// to the grid: a particle outside it is refused by the step's checks before it is binned).
+    #[inline(always)]
+    pub fn key(&self, first: &[i64; D]) -> u32 {
+        let mut key = 0usize;
+        for a in (0..D).rev() {
+            let s = (first[a] + self.ghost).clamp(0, self.dims[a] as i64 - 1) as usize;
+            key = key * self.blocks[a] + (s >> self.shift[a]);
+        }
+        key as u32
+    }
+}
+
 /// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
 #[derive(Debug, Clone)]
 pub struct Bins<const D: usize> {
@@ -92,30 +135,25 @@ impl<const D: usize> Bins<D> {
         n: usize,
         first_node: impl Fn(usize) -> [i64; D] + Sync,
     ) {
-        // Powers of two, so that a particle's block is a shift of its node index.
-        let side = (width.max(2) - 1).max(MIN_BLOCK).next_power_of_two();
-        let long = side.max(LONG_BLOCK);
-        let block: [usize; D] = std::array::from_fn(|a| if a == 0 { long } else { side });
-        let dims = grid.dims();
-        let blocks: [usize; D] = std::array::from_fn(|a| dims[a].div_ceil(block[a]));
+        let layout = BlockLayout::new(width, grid);
+        let mut keys = std::mem::take(&mut self.keys);
+        keys.resize(n, 0);
+        keys.par_iter_mut()
+            .enumerate()
+            .for_each(|(p, k)| *k = layout.key(&first_node(p)));
+        self.compute_from_keys(&layout, &keys);
+        self.keys = keys;
+    }
+
+    /// Bins the particles whose blocks under `layout` are `keys` ([`BlockLayout::key`] of each
+    /// one's first stencil node; the B-spline stencils compute them with their factors).
+    pub fn compute_from_keys(&mut self, layout: &BlockLayout<D>, keys: &[u32]) {
+        let n = keys.len();
+        assert!(n < u32::MAX as usize);
+        let (block, blocks) = (layout.block, layout.blocks);
         let total: usize = blocks.iter().product();
-        assert!(total < u32::MAX as usize && n < u32::MAX as usize);
         self.block = block;
         self.blocks = blocks;
-        let shift = block.map(|b| b.trailing_zeros());
-        let ghost = grid.ghost_layers() as i64;
-        // Block of every particle, from its stencil's first node (clamped: a particle outside
-        // the grid is refused by the step's checks before it gets here).
-        self.keys.resize(n, 0);
-        self.keys.par_iter_mut().enumerate().for_each(|(p, k)| {
-            let first = first_node(p);
-            let mut key = 0usize;
-            for a in (0..D).rev() {
-                let s = (first[a] + ghost).clamp(0, dims[a] as i64 - 1) as usize;
-                key = key * blocks[a] + (s >> shift[a]);
-            }
-            *k = key as u32;
-        });
         // Counting sort (stable: particles of a block stay in index order), in parallel over
         // chunks of the particles: each chunk counts its keys, a prefix over (block, chunk)
         // gives each chunk its slots in every block, and the chunks place their particles at
@@ -126,7 +164,7 @@ impl<const D: usize> Bins<D> {
         self.counts.resize(chunks * total, 0);
         self.counts
             .par_chunks_mut(total)
-            .zip(self.keys.par_chunks(chunk))
+            .zip(keys.par_chunks(chunk))
             .for_each(|(counts, keys)| {
                 for &k in keys {
                     counts[k as usize] += 1;
@@ -149,7 +187,7 @@ impl<const D: usize> Bins<D> {
         let order = SharedSlice::new(&mut self.order);
         self.counts
             .par_chunks_mut(total)
-            .zip(self.keys.par_chunks(chunk))
+            .zip(keys.par_chunks(chunk))
             .enumerate()
             .for_each(|(c, (slots, keys))| {
                 for (i, &k) in keys.iter().enumerate() {

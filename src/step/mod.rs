@@ -30,7 +30,7 @@ use profile::lap;
 pub use profile::{MemoryUse, PhaseTimes};
 pub use timestep::Progress;
 
-pub use bins::Bins;
+pub use bins::{Bins, BlockLayout};
 pub use grid_to_particle::{
     grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, NewState,
     NewStateWriter, NoFinish, ParticleUpdate,
@@ -315,12 +315,10 @@ impl<const D: usize> Sim<D> {
             derivatives,
         );
         self.work.times.shape += lap(&mut clock);
-        // The particles' blocks from their stencils' first nodes.
+        // The particles' blocks, found with the factors from their stencils' first nodes.
         self.work
             .bins
-            .compute_from_origins(W, &self.grid, self.particles.len(), |p| {
-                stencils.first_node(p)
-            });
+            .compute_from_keys(&BlockLayout::new(W, &self.grid), stencils.block_keys());
         self.work.times.bins += lap(&mut clock);
         let result = self.phases(dt, &stencils.local(), None);
         *storage(&mut self.work) = stencils;

@@ -951,8 +951,9 @@ fn factored_and_stored_stencils_agree_to_round_off() {
 /// two blocks apart along some axis, so the stencils of their particles never share a node.
 #[test]
 fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
-    use crate::shape::{ShapeFunction, StencilView, Stencils};
-    use crate::step::Bins;
+    use crate::shape::TensorStencils;
+    use crate::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils};
+    use crate::step::{Bins, BlockLayout};
     let mut rng = crate::shape::UniformRng::new(5);
     for shape in [
         Shape::Linear,
@@ -997,6 +998,29 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
         }
         assert_eq!(blocks_seen, bins.occupied.len());
         assert!(bins.colours.iter().filter(|c| !c.is_empty()).count() == 4);
+        // The B-spline stencils find the same blocks with their factors (the step's bins).
+        let keyed = |stencils_keys: &[u32], width: usize| {
+            let mut b = Bins::<2>::default();
+            b.compute_from_keys(&BlockLayout::new(width, &grid), stencils_keys);
+            (b.order, b.occupied, b.colours, b.node_blocks)
+        };
+        let from_factors = match shape {
+            Shape::Linear => {
+                let mut t = TensorStencils::<2, 2>::default();
+                t.compute(&BSpline::new(BSplineOrder::Linear), &grid, &x);
+                Some(keyed(t.block_keys(), 2))
+            }
+            Shape::BSpline3 => {
+                let mut t = TensorStencils::<2, 4>::default();
+                t.compute(&BSpline::new(BSplineOrder::Cubic), &grid, &x);
+                Some(keyed(t.block_keys(), 4))
+            }
+            _ => None,
+        };
+        if let Some(from_factors) = from_factors {
+            let from_shape = (bins.order, bins.occupied, bins.colours, bins.node_blocks);
+            assert_eq!(from_factors, from_shape, "{shape:?}");
+        }
     }
 }
 
