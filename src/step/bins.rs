@@ -32,6 +32,14 @@ const MIN_BLOCK: usize = 4;
 /// 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
 const LONG_BLOCK: usize = 128;
 
+/// Occupied rows of blocks from which particle to grid runs by rows ([`Bins::tasks`]): a row
+/// is a longer run of particles and nodes than a block, and there are half as many colours.
+/// Measured (2D MLS, 10^6 particles, 158 rows): particle to grid 17.8 → 15.8 ns per
+/// particle-step on one thread, 10.2 → 9.0 on two; 3D unchanged. Fewer rows would leave too
+/// few tasks per colour to share among threads. The choice depends on the particles only, not
+/// on the number of threads.
+const MIN_ROWS: usize = 32;
+
 /// Average run of consecutive particle slots in block order below which the particles are
 /// stored anew in that order (`Bins::is_scattered`).
 const SORTED_RUN: usize = 512;
@@ -94,6 +102,13 @@ pub struct Bins<const D: usize> {
     pub occupied: Vec<(u32, std::ops::Range<usize>)>,
     /// Indices into `occupied`, per colour.
     pub colours: Vec<Vec<u32>>,
+    /// The tasks of particle to grid, by colour: ranges of `order` whose particles one thread
+    /// maps in turn, while the tasks of one colour run in parallel (they write disjoint nodes).
+    /// With at least `MIN_ROWS` occupied rows of blocks (the blocks along axis 0 that share
+    /// their other coordinates), a task is a row and the colour is the parity of the row's
+    /// coordinates (`2^(D−1)` colours, rows of one colour being two blocks apart); otherwise
+    /// (a body thin across axis 0) a task is a block, coloured as `colours`.
+    pub tasks: Vec<Vec<std::ops::Range<usize>>>,
     /// Node blocks touched by some particle's stencil, ascending.
     pub node_blocks: Vec<u32>,
     /// Scratch: particles per block, then start offsets; and node-block marks.
@@ -110,6 +125,7 @@ impl<const D: usize> Default for Bins<D> {
             order: Vec::new(),
             occupied: Vec::new(),
             colours: Vec::new(),
+            tasks: Vec::new(),
             node_blocks: Vec::new(),
             counts: Vec::new(),
             marks: Vec::new(),
@@ -218,6 +234,35 @@ impl<const D: usize> Bins<D> {
                 if inside {
                     self.marks[key] = true;
                 }
+            }
+        }
+        // Rows: runs of occupied blocks with the same key above axis 0 (consecutive, as the
+        // keys ascend with axis 0 fastest).
+        let mut rows = Vec::new();
+        let mut i = 0;
+        while i < self.occupied.len() {
+            let row = self.occupied[i].0 as usize / blocks[0];
+            let start = self.occupied[i].1.start;
+            let mut end = self.occupied[i].1.end;
+            i += 1;
+            while i < self.occupied.len() && self.occupied[i].0 as usize / blocks[0] == row {
+                end = self.occupied[i].1.end;
+                i += 1;
+            }
+            rows.push((row, start..end));
+        }
+        self.tasks.iter_mut().for_each(Vec::clear);
+        if rows.len() >= MIN_ROWS {
+            self.tasks.resize(1 << (D - 1), Vec::new());
+            for (row, range) in rows {
+                let c = self.coords(row * blocks[0]);
+                let colour = (1..D).map(|a| (c[a] & 1) << (a - 1)).sum::<usize>();
+                self.tasks[colour].push(range);
+            }
+        } else {
+            self.tasks.resize(1 << D, Vec::new());
+            for (tasks, colour) in self.tasks.iter_mut().zip(&self.colours) {
+                tasks.extend(colour.iter().map(|&b| self.occupied[b as usize].1.clone()));
             }
         }
         self.node_blocks.clear();

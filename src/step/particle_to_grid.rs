@@ -35,8 +35,8 @@ pub struct Forces<'a, const D: usize> {
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
 /// * `body`: with contact, only the particles of this material map (to its own field).
 ///
-/// Runs in parallel by colours of grid blocks ([`Bins`]): every node's sum is taken in the same
-/// order with any number of threads.
+/// Runs in parallel by colours of rows of grid blocks, or of blocks ([`Bins::tasks`]): every
+/// node's sum is taken in the same order with any number of threads.
 #[allow(clippy::too_many_arguments)]
 pub fn particle_to_grid<const D: usize, S, A>(
     grid: &Grid<D>,
@@ -177,9 +177,9 @@ pub fn particle_to_grid<const D: usize, S, A>(
             stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
         },
     );
-    for colour in &bins.colours {
-        colour.par_iter().for_each(|&b| {
-            let range = bins.occupied[b as usize].1.clone();
+    for colour in &bins.tasks {
+        colour.par_iter().for_each(|range| {
+            let range = range.clone();
             crate::cpu::wide(
                 #[inline(always)]
                 || {

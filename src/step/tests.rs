@@ -66,6 +66,41 @@ fn block_of<const D: usize>(
     sim
 }
 
+/// A column of rubber 16 cells tall in a grid 160 cells tall along axis 1 (two cells across the
+/// other axes), spinning: 40 rows of blocks, so particle to grid runs by rows
+/// (`Bins::tasks`).
+fn tall_column<const D: usize>(transfer: Transfer) -> Sim<D> {
+    let mut dims = [8; D];
+    dims[1] = 160;
+    let mut sim = Sim::<D>::new(Vector::<D>::zeros(), dims, 0.1).unwrap();
+    sim.set_transfer(transfer).unwrap();
+    let m = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
+    let (across, along) = (4usize, 300usize);
+    let mut x = Vec::new();
+    for k in 0..across.pow(D as u32 - 1) * along {
+        let (mut r, mut p) = (k, Vector::<D>::zeros());
+        for a in 0..D {
+            let n = if a == 1 { along } else { across };
+            p[a] = 0.3125 + 0.05 * (r % n) as f64 + 0.003 * ((k * 7 + a * 3) % 5) as f64;
+            r /= n;
+        }
+        x.push(p);
+    }
+    let centre = 0.4;
+    let v: Vec<Vector<D>> = x
+        .iter()
+        .map(|p| {
+            let mut v = Vector::<D>::from_element(0.1);
+            v[0] += -0.01 * (p[1] - 7.8);
+            v[1] += 0.75 * (p[0] - centre);
+            v
+        })
+        .collect();
+    let vol = vec![0.05f64.powi(D as i32); x.len()];
+    sim.add_particles(m, &x, &vol, Some(&v)).unwrap();
+    sim
+}
+
 fn angular_momentum_2d(sim: &Sim<2>) -> f64 {
     let ps = sim.particles();
     let mut l = 0.0;
@@ -581,8 +616,9 @@ fn vc_finds_the_surface_of_the_particles_at_every_step() {
 }
 
 /// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
-/// 2 worker threads (P2G runs by colours of grid blocks; the other phases are per particle or
-/// per node), for B-splines with APIC and MLS and for RK with VC, in 2D and 3D.
+/// 2 worker threads (P2G runs by colours of rows of grid blocks or of blocks; the other phases
+/// are per particle or per node), for B-splines with APIC and MLS and for RK with VC, and by rows
+/// in a tall column, in 2D and 3D.
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
     fn run<const D: usize>(
@@ -613,6 +649,26 @@ fn results_do_not_depend_on_the_thread_count() {
         order: 1,
         support: 2.0,
     };
+    // Particle to grid by rows of blocks (a tall column) as well as by blocks (the block).
+    fn run_tall<const D: usize>(threads: usize) -> Particles<D> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut sim = tall_column::<D>(Transfer::Mls);
+            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
+            let dt = sim.stable_dt(0.3).unwrap();
+            for _ in 0..10 {
+                sim.step(dt).unwrap();
+            }
+            let rows = 1 << (D - 1);
+            assert_eq!(sim.work.bins.tasks.len(), rows, "not by rows");
+            sim.particles().clone()
+        })
+    }
+    assert_eq!(run_tall::<2>(1), run_tall::<2>(2), "2D by rows");
+    assert_eq!(run_tall::<3>(1), run_tall::<3>(2), "3D by rows");
     for (shape, transfer, vc) in [
         (Shape::BSpline2, Transfer::Apic, false),
         (Shape::BSpline2, Transfer::Mls, false),
@@ -947,6 +1003,33 @@ fn factored_and_stored_stencils_agree_to_round_off() {
     }
 }
 
+/// Every particle is in one task of particle to grid, and the tasks of one colour write
+/// disjoint nodes.
+fn check_tasks(
+    bins: &crate::step::Bins<2>,
+    stencils: &crate::shape::Stencils<2>,
+    nodes: usize,
+    particles: usize,
+) {
+    use crate::shape::StencilView;
+    let mut seen = vec![0; particles];
+    for colour in &bins.tasks {
+        let mut owner = vec![usize::MAX; nodes];
+        for (t, range) in colour.iter().enumerate() {
+            for &p in &bins.order[range.clone()] {
+                seen[p as usize] += 1;
+                stencils.for_each(p as usize, |_, s| {
+                    if s.value != 0.0 || s.gradient != Vector::<2>::zeros() {
+                        assert!(owner[s.node] == usize::MAX || owner[s.node] == t);
+                        owner[s.node] = t;
+                    }
+                });
+            }
+        }
+    }
+    assert!(seen.iter().all(|&c| c == 1));
+}
+
 /// The bins hold every particle once, in index order within a block; blocks of one colour are
 /// two blocks apart along some axis, so the stencils of their particles never share a node.
 #[test]
@@ -998,6 +1081,22 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
         }
         assert_eq!(blocks_seen, bins.occupied.len());
         assert!(bins.colours.iter().filter(|c| !c.is_empty()).count() == 4);
+        // The tasks of particle to grid: blocks here (six rows of blocks, fewer than
+        // `MIN_ROWS`).
+        assert_eq!(bins.tasks.len(), 4);
+        check_tasks(&bins, &stencils, grid.node_count(), x.len());
+        // A grid 40 to 80 rows of blocks tall: rows (two colours).
+        let mut tall = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [300, 320], 0.1).unwrap();
+        tall.set_ghost_layers(f.ghost_layers()).unwrap();
+        let y: Vec<Vector<2>> = (0..8000)
+            .map(|_| Vector::<2>::new(30.0 * rng.uniform(), 32.0 * rng.uniform()))
+            .collect();
+        let mut tall_bins = Bins::<2>::default();
+        tall_bins.compute(f.as_ref(), &tall, &y);
+        assert_eq!(tall_bins.tasks.len(), 2, "{shape:?}");
+        let mut tall_stencils = Stencils::<2>::default();
+        tall_stencils.compute(f.as_ref(), &tall, &y);
+        check_tasks(&tall_bins, &tall_stencils, tall.node_count(), y.len());
         // The B-spline stencils find the same blocks with their factors (the step's bins).
         let keyed = |stencils_keys: &[u32], width: usize| {
             let mut b = Bins::<2>::default();
