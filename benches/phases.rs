@@ -142,11 +142,11 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     });
     let walls = Walls::<D>::default();
     g.bench_function("grid_update", |b| {
-        b.iter(|| grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0))
+        b.iter(|| grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0, false))
     });
     // The node velocities the gathers read (also when the benchmarks above are filtered out).
     p2g(&grid, &ps, &bins, &factors.local(), forces, &mut nodes);
-    grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0);
+    grid_update(&grid, &walls, &mut nodes, Some(dt), 0.0, false);
     let (mut new, mut admissible) = (NewState::<D>::default(), Vec::new());
     for (name, mls) in [("bspline2 apic", false), ("bspline2 mls", true)] {
         let plan = TransferPlan {

@@ -496,7 +496,14 @@ impl<const D: usize> Sim<D> {
                     nodes,
                 );
                 // 4. Grid update per body, then the contact correction where bodies meet.
-                grid_update(grid, &self.options.walls, nodes, Some(dt), mass_floor);
+                grid_update(
+                    grid,
+                    &self.options.walls,
+                    nodes,
+                    Some(dt),
+                    mass_floor,
+                    false,
+                );
                 if let Some(v) = rigid[b] {
                     for &n in &nodes.active {
                         nodes.velocity[n] = v;
@@ -538,12 +545,14 @@ impl<const D: usize> Sim<D> {
             }
             work.times.particle_to_grid += lap(&mut clock);
             // 4. Grid update with the wall conditions.
+            let no_force = forces.mls.is_some() && !boundary.has_tractions();
             grid_update(
                 grid,
                 &self.options.walls,
                 &mut work.nodes,
                 Some(dt),
                 mass_floor,
+                no_force,
             );
         }
 
@@ -608,7 +617,14 @@ impl<const D: usize> Sim<D> {
                 None,
                 &mut work.nodes,
             );
-            grid_update(grid, &self.options.walls, &mut work.nodes, None, mass_floor);
+            grid_update(
+                grid,
+                &self.options.walls,
+                &mut work.nodes,
+                None,
+                mass_floor,
+                false,
+            );
             let nodes = &work.nodes;
             new.deformation_gradient
                 .par_iter_mut()
