@@ -9,7 +9,10 @@
 //! two blocks apart along some axis, so they write disjoint nodes. The map runs colour by colour,
 //! the blocks of a colour in parallel, the particles of a block in storage order: every node's
 //! sum is taken in an order fixed by the particles' positions and storage order (which the
-//! step's sorts set from positions alone), never by the number of threads.
+//! step's sorts set from positions alone), never by the number of threads. When the particles
+//! occupy enough rows of blocks (`MIN_ROWS`), the map's tasks are whole rows instead (the blocks
+//! along axis 0, in turn), coloured by the parity of the other block coordinates
+//! ([`Bins::tasks`]): longer runs and half the colours.
 //!
 //! The occupied blocks also give the node blocks a step touches (each occupied block and its
 //! upper neighbours), so the list of active nodes is collected without visiting empty blocks.
