@@ -304,8 +304,10 @@ pub struct TensorStencils<const D: usize, const W: usize> {
     cell_size: f64,
     /// Integer index of the first stencil node.
     first: Vec<[i64; D]>,
-    /// Storage index of the first stencil node.
-    base: Vec<usize>,
+    /// The storage index of the integer node index 0 (`Grid::node_index([0; D])`); a stencil's
+    /// storage index is formed from its first node rather than stored (8 bytes per particle
+    /// less for the shape phase to write and the transfers to read).
+    zero_index: usize,
     values: Vec<[[f64; W]; D]>,
     derivatives: Vec<[[f64; W]; D]>,
     /// Grid block of each particle ([`BlockLayout::key`] of its first node), for the bins.
@@ -327,7 +329,7 @@ pub struct TensorView<'a, const D: usize, const W: usize> {
     origin: Vector<D>,
     cell_size: f64,
     first: &'a [[i64; D]],
-    base: &'a [usize],
+    zero_index: usize,
     values: &'a [[[f64; W]; D]],
     derivatives: &'a [[[f64; W]; D]],
 }
@@ -339,7 +341,7 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
             origin: Vector::zeros(),
             cell_size: 0.0,
             first: Vec::new(),
-            base: Vec::new(),
+            zero_index: 0,
             values: Vec::new(),
             derivatives: Vec::new(),
             keys: Vec::new(),
@@ -377,8 +379,8 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.origin = grid.origin;
         self.cell_size = grid.cell_size;
         let n = x.len();
+        self.zero_index = grid.node_index([0; D]);
         self.first.resize(n, [0; D]);
-        self.base.resize(n, 0);
         self.values.resize(n, [[0.0; W]; D]);
         self.keys.resize(n, 0);
         let layout = BlockLayout::new(W, grid);
@@ -397,7 +399,6 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         let fill = crate::cpu::inlined(
             #[inline(always)]
             |first: &mut [[i64; D]],
-             base: &mut [usize],
              keys: &mut [u32],
              w: &mut [[[f64; W]; D]],
              x: &[Vector<D>],
@@ -424,7 +425,6 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                             let dw = dw.as_deref_mut().map(|d| &mut d[q]);
                             shape.factors_into(grid, &x[q], &mut first[q], &mut w[q], dw);
                         }
-                        base[q] = grid.node_index(first[q]);
                         keys[q] = layout.key(&first[q]);
                     }
                     i = end;
@@ -434,23 +434,22 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         let chunks = self
             .first
             .par_chunks_mut(CHUNK)
-            .zip(self.base.par_chunks_mut(CHUNK))
             .zip(self.keys.par_chunks_mut(CHUNK))
             .zip(self.values.par_chunks_mut(CHUNK))
             .zip(x.par_chunks(CHUNK));
         match derivatives {
             Some(derivatives) => chunks.zip(derivatives.par_chunks_mut(CHUNK)).for_each(
-                |(((((first, base), keys), w), x), dw)| {
+                |((((first, keys), w), x), dw)| {
                     crate::cpu::wide(
                         #[inline(always)]
-                        || fill(first, base, keys, w, x, Some(dw)),
+                        || fill(first, keys, w, x, Some(dw)),
                     )
                 },
             ),
-            None => chunks.for_each(|((((first, base), keys), w), x)| {
+            None => chunks.for_each(|(((first, keys), w), x)| {
                 crate::cpu::wide(
                     #[inline(always)]
-                    || fill(first, base, keys, w, x, None),
+                    || fill(first, keys, w, x, None),
                 )
             }),
         }
@@ -471,7 +470,6 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         self.first.capacity() * 8 * D
-            + self.base.capacity() * std::mem::size_of::<usize>()
             + self.keys.capacity() * 4
             + (self.values.capacity() + self.derivatives.capacity()) * 8 * D * W
     }
@@ -491,13 +489,23 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
         })
     }
 
+    /// The storage index of particle `p`'s first stencil node (`Grid::node_index` of it).
+    #[inline(always)]
+    fn base(&self, p: usize) -> usize {
+        let mut n = self.zero_index as i64;
+        for (&i, &stride) in self.first[p].iter().zip(&self.strides) {
+            n += i * stride as i64;
+        }
+        n as usize
+    }
+
     /// What a transfer of particle `p` reads of its stencil: the storage index of the first
     /// node, the factors, their derivatives (zeros unless `derivatives`) and the offsets
     /// `x_I − x_p` per axis (zeros unless `xp` is given).
     #[inline(always)]
     fn factors(&self, p: usize, derivatives: bool, xp: Option<&Vector<D>>) -> Factors<'_, D, W> {
         Factors {
-            base: self.base[p],
+            base: self.base(p),
             w: &self.values[p],
             dw: match derivatives {
                 true => self.derivatives[p],
@@ -536,7 +544,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
         xp: Option<&Vector<D>>,
         mut f: impl FnMut(usize, StencilNode<D>, Vector<D>),
     ) {
-        let (base, w, dw) = (self.base[p], &self.values[p], &self.derivatives[p]);
+        let (base, w, dw) = (self.base(p), &self.values[p], &self.derivatives[p]);
         // 1D offsets per axis, as `Grid::node_position` forms them, so that both views give
         // the same bits.
         let offsets = match xp {
@@ -701,7 +709,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             origin: self.origin,
             cell_size: self.cell_size,
             first: &self.first,
-            base: &self.base,
+            zero_index: self.zero_index,
             values: &self.values,
             derivatives: &self.derivatives,
         }
