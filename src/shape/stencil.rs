@@ -310,7 +310,8 @@ pub struct TensorStencils<const D: usize, const W: usize> {
     zero_index: usize,
     values: Vec<[[f64; W]; D]>,
     derivatives: Vec<[[f64; W]; D]>,
-    /// Grid block of each particle ([`BlockLayout::key`] of its first node), for the bins.
+    /// Grid block of each particle under the layout of the last `compute_with`
+    /// ([`BlockLayout::key`] of its first node), for the bins.
     keys: Vec<u32>,
 }
 
@@ -352,10 +353,11 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
 impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// Evaluates the factors of `shape` (whose width must be `W`) at every position.
     pub fn compute(&mut self, shape: &BSpline, grid: &Grid<D>, x: &[Vector<D>]) {
-        self.compute_with(shape, grid, x, true);
+        self.compute_with(shape, grid, x, true, &BlockLayout::new(W, grid));
     }
 
-    /// As [`TensorStencils::compute`]; without `derivatives` only the values are stored (the
+    /// As [`TensorStencils::compute`], with each particle's block under `layout`
+    /// ([`TensorStencils::block_keys`]); without `derivatives` only the values are stored (the
     /// MLS transfer without contact reads no gradient), and asking for a gradient later panics.
     pub fn compute_with(
         &mut self,
@@ -363,6 +365,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         grid: &Grid<D>,
         x: &[Vector<D>],
         derivatives: bool,
+        layout: &BlockLayout<D>,
     ) {
         assert_eq!(shape.order.width(), W, "tensor stencil width");
         // The factored sums read a row of `W` nodes as contiguous storage.
@@ -383,7 +386,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.first.resize(n, [0; D]);
         self.values.resize(n, [[0.0; W]; D]);
         self.keys.resize(n, 0);
-        let layout = BlockLayout::new(W, grid);
+
         // First node, its storage index and the values; the factors for the derivatives. In
         // chunks, each compiled for the processor's vector instructions (`cpu::wide`).
         const CHUNK: usize = 1024;
@@ -455,13 +458,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         }
     }
 
-    /// Integer index of the first stencil node of particle `p`.
-    #[inline]
-    pub fn first_node(&self, p: usize) -> [i64; D] {
-        self.first[p]
-    }
-
-    /// Each particle's grid block under [`BlockLayout::new`]`(W, grid)`, found with the factors
+    /// Each particle's block under the layout given to `compute_with`, found with the factors
     /// (for [`Bins::compute_from_keys`](crate::step::Bins::compute_from_keys)).
     pub fn block_keys(&self) -> &[u32] {
         &self.keys
@@ -544,18 +541,17 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
         xp: Option<&Vector<D>>,
         mut f: impl FnMut(usize, StencilNode<D>, Vector<D>),
     ) {
-        let (base, w, dw) = (self.base(p), &self.values[p], &self.derivatives[p]);
-        // 1D offsets per axis, as `Grid::node_position` forms them, so that both views give
-        // the same bits.
-        let offsets = match xp {
-            Some(xp) => self.offsets(p, xp),
-            None => [[0.0; W]; D],
-        };
+        let Factors {
+            base,
+            w,
+            dw,
+            offsets,
+        } = self.factors(p, true, xp);
         // Same slot order as `ShapeFunction::evaluate`: axis 0 fastest.
         let mut k = [0usize; D];
         let mut node = base;
         for s in 0..W.pow(D as u32) {
-            let (value, gradient) = tensor_product(w, dw, &k);
+            let (value, gradient) = tensor_product(w, &dw, &k);
             let offset = Vector::<D>::from_fn(|a, _| offsets[a][k[a]]);
             f(
                 s,

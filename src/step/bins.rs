@@ -60,6 +60,19 @@ pub struct BlockLayout<const D: usize> {
     ghost: i64,
 }
 
+impl<const D: usize> Default for BlockLayout<D> {
+    /// No blocks (before the first binning).
+    fn default() -> Self {
+        BlockLayout {
+            block: [MIN_BLOCK; D],
+            blocks: [0; D],
+            shift: [0; D],
+            dims: [0; D],
+            ghost: 0,
+        }
+    }
+}
+
 impl<const D: usize> BlockLayout<D> {
     pub fn new(width: usize, grid: &Grid<D>) -> Self {
         let side = (width.max(2) - 1).max(MIN_BLOCK).next_power_of_two();
@@ -93,11 +106,9 @@ impl<const D: usize> BlockLayout<D> {
 /// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
 #[derive(Debug, Clone)]
 pub struct Bins<const D: usize> {
-    /// Nodes per block side, per axis.
-    pub block: [usize; D],
-    /// Blocks per axis (covering every stored node).
-    blocks: [usize; D],
-    /// Block of each particle.
+    /// The blocks of the last binning.
+    layout: BlockLayout<D>,
+    /// Block of each particle (when `Bins::compute` found them).
     keys: Vec<u32>,
     /// Particle indices, block by block (ascending keys), ascending within a block.
     pub order: Vec<u32>,
@@ -122,8 +133,7 @@ pub struct Bins<const D: usize> {
 impl<const D: usize> Default for Bins<D> {
     fn default() -> Self {
         Bins {
-            block: [MIN_BLOCK; D],
-            blocks: [0; D],
+            layout: BlockLayout::default(),
             keys: Vec::new(),
             order: Vec::new(),
             occupied: Vec::new(),
@@ -137,29 +147,16 @@ impl<const D: usize> Default for Bins<D> {
 }
 
 impl<const D: usize> Bins<D> {
-    /// Bins the particles at `x` for `shape` on `grid`.
+    /// Bins the particles at `x` for `shape` on `grid`, from the first node of each one's
+    /// stencil (`ShapeFunction::stencil_origin`; the B-spline stencils find the keys with their
+    /// factors and call [`Bins::compute_from_keys`]).
     pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
-        self.compute_from_origins(shape.stencil_width(), grid, x.len(), |p| {
-            shape.stencil_origin(&grid.to_cell_units(&x[p]))
-        });
-    }
-
-    /// Bins `n` particles whose stencils, `width` nodes per axis, start at the integer node
-    /// index `first_node(p)` (`ShapeFunction::stencil_origin`; stencils stored as factors
-    /// already hold it).
-    pub fn compute_from_origins(
-        &mut self,
-        width: usize,
-        grid: &Grid<D>,
-        n: usize,
-        first_node: impl Fn(usize) -> [i64; D] + Sync,
-    ) {
-        let layout = BlockLayout::new(width, grid);
+        let layout = BlockLayout::new(shape.stencil_width(), grid);
         let mut keys = std::mem::take(&mut self.keys);
-        keys.resize(n, 0);
-        keys.par_iter_mut()
-            .enumerate()
-            .for_each(|(p, k)| *k = layout.key(&first_node(p)));
+        keys.resize(x.len(), 0);
+        keys.par_iter_mut().zip(x).for_each(|(k, x)| {
+            *k = layout.key(&shape.stencil_origin(&grid.to_cell_units(x)));
+        });
         self.compute_from_keys(&layout, &keys);
         self.keys = keys;
     }
@@ -169,10 +166,9 @@ impl<const D: usize> Bins<D> {
     pub fn compute_from_keys(&mut self, layout: &BlockLayout<D>, keys: &[u32]) {
         let n = keys.len();
         assert!(n < u32::MAX as usize);
-        let (block, blocks) = (layout.block, layout.blocks);
+        self.layout = *layout;
+        let blocks = layout.blocks;
         let total: usize = blocks.iter().product();
-        self.block = block;
-        self.blocks = blocks;
         // Counting sort (stable: particles of a block stay in index order), in parallel over
         // chunks of the particles: each chunk counts its keys, a prefix over (block, chunk)
         // gives each chunk its slots in every block, and the chunks place their particles at
@@ -299,8 +295,8 @@ impl<const D: usize> Bins<D> {
     /// Block coordinates of block `key`.
     fn coords(&self, mut key: usize) -> [usize; D] {
         std::array::from_fn(|a| {
-            let c = key % self.blocks[a];
-            key /= self.blocks[a];
+            let c = key % self.layout.blocks[a];
+            key /= self.layout.blocks[a];
             c
         })
     }
@@ -313,8 +309,9 @@ impl<const D: usize> Bins<D> {
         let strides = grid.strides();
         'blocks: for &key in &self.node_blocks {
             let c = self.coords(key as usize);
-            let lo: [usize; D] = std::array::from_fn(|a| c[a] * self.block[a]);
-            let hi: [usize; D] = std::array::from_fn(|a| ((c[a] + 1) * self.block[a]).min(dims[a]));
+            let block = self.layout.block;
+            let lo: [usize; D] = std::array::from_fn(|a| c[a] * block[a]);
+            let hi: [usize; D] = std::array::from_fn(|a| ((c[a] + 1) * block[a]).min(dims[a]));
             let mut i = lo;
             loop {
                 let n: usize = (0..D).map(|a| i[a] * strides[a]).sum();

@@ -308,17 +308,19 @@ impl<const D: usize> Sim<D> {
         let mut clock = std::time::Instant::now();
         // MLS reads no shape-function gradient, except for the mass gradient of contact.
         let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
+        // The particles' blocks are found with the factors, from their stencils' first nodes.
+        let layout = BlockLayout::new(W, &self.grid);
         stencils.compute_with(
             &BSpline::new(order),
             &self.grid,
             &self.particles.position,
             derivatives,
+            &layout,
         );
         self.work.times.shape += lap(&mut clock);
-        // The particles' blocks, found with the factors from their stencils' first nodes.
         self.work
             .bins
-            .compute_from_keys(&BlockLayout::new(W, &self.grid), stencils.block_keys());
+            .compute_from_keys(&layout, stencils.block_keys());
         self.work.times.bins += lap(&mut clock);
         let result = self.phases(dt, &stencils.local(), None);
         *storage(&mut self.work) = stencils;

@@ -621,29 +621,42 @@ fn vc_finds_the_surface_of_the_particles_at_every_step() {
 /// in a tall column, in 2D and 3D.
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
+    /// The particles after `steps` steps under gravity on `threads` worker threads, and the
+    /// number of colours particle to grid ran by.
+    fn steps_on<const D: usize>(
+        threads: usize,
+        steps: usize,
+        make: impl FnOnce() -> Sim<D> + Send,
+    ) -> (Particles<D>, usize) {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut sim = make();
+            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
+            let dt = sim.stable_dt(0.3).unwrap();
+            for _ in 0..steps {
+                sim.step(dt).unwrap();
+            }
+            (sim.particles().clone(), sim.work.bins.tasks.len())
+        })
+    }
     fn run<const D: usize>(
         threads: usize,
         shape: Shape,
         transfer: Transfer,
         vc: bool,
     ) -> Particles<D> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        let make = || {
             let mut sim = block::<D>(shape, transfer);
             if vc {
                 sim.set_integration(crate::sim::Integration::Vc { order: 1 })
                     .unwrap();
             }
-            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
-            let dt = sim.stable_dt(0.3).unwrap();
-            for _ in 0..15 {
-                sim.step(dt).unwrap();
-            }
-            sim.particles().clone()
-        })
+            sim
+        };
+        steps_on(threads, 15, make).0
     }
     let rk1 = Shape::Rk {
         order: 1,
@@ -651,21 +664,9 @@ fn results_do_not_depend_on_the_thread_count() {
     };
     // Particle to grid by rows of blocks (a tall column) as well as by blocks (the block).
     fn run_tall<const D: usize>(threads: usize) -> Particles<D> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            let mut sim = tall_column::<D>(Transfer::Mls);
-            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
-            let dt = sim.stable_dt(0.3).unwrap();
-            for _ in 0..10 {
-                sim.step(dt).unwrap();
-            }
-            let rows = 1 << (D - 1);
-            assert_eq!(sim.work.bins.tasks.len(), rows, "not by rows");
-            sim.particles().clone()
-        })
+        let (particles, colours) = steps_on(threads, 10, || tall_column::<D>(Transfer::Mls));
+        assert_eq!(colours, 1 << (D - 1), "not by rows");
+        particles
     }
     assert_eq!(run_tall::<2>(1), run_tall::<2>(2), "2D by rows");
     assert_eq!(run_tall::<3>(1), run_tall::<3>(2), "3D by rows");
@@ -1098,9 +1099,9 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
         tall_stencils.compute(f.as_ref(), &tall, &y);
         check_tasks(&tall_bins, &tall_stencils, tall.node_count(), y.len());
         // The B-spline stencils find the same blocks with their factors (the step's bins).
-        let keyed = |stencils_keys: &[u32], width: usize| {
+        let keyed = |keys: &[u32], width: usize| {
             let mut b = Bins::<2>::default();
-            b.compute_from_keys(&BlockLayout::new(width, &grid), stencils_keys);
+            b.compute_from_keys(&BlockLayout::new(width, &grid), keys);
             (b.order, b.occupied, b.colours, b.node_blocks)
         };
         let from_factors = match shape {
