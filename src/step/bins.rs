@@ -103,6 +103,22 @@ impl<const D: usize> BlockLayout<D> {
     }
 }
 
+/// The runs of equal consecutive keys: each key and how many times it repeats. Sorted particles
+/// keep their blocks in long runs, so the counting sort adds and places a run at once instead of
+/// incrementing a block's count particle by particle: that is a chain of loads and stores to
+/// one address, a store-to-load forwarding latency per particle on processors that do not
+/// rename memory. 2D MLS, 10^6 particles, Intel Xeon: bins 5.0–5.3 → 1.75 ns per
+/// particle-step on one thread, 2.8 → 1.05 on two (BENCHMARKS.md, session 14).
+fn runs(keys: &[u32]) -> impl Iterator<Item = (u32, u32)> + '_ {
+    let mut rest = keys;
+    std::iter::from_fn(move || {
+        let (&k, tail) = rest.split_first()?;
+        let run = 1 + tail.iter().take_while(|&&t| t == k).count();
+        rest = &rest[run..];
+        Some((k, run as u32))
+    })
+}
+
 /// Particles sorted by block, the occupied blocks by colour, and the node blocks they touch.
 #[derive(Debug, Clone)]
 pub struct Bins<const D: usize> {
@@ -181,8 +197,8 @@ impl<const D: usize> Bins<D> {
             .par_chunks_mut(total)
             .zip(keys.par_chunks(chunk))
             .for_each(|(counts, keys)| {
-                for &k in keys {
-                    counts[k as usize] += 1;
+                for (k, run) in runs(keys) {
+                    counts[k as usize] += run;
                 }
             });
         self.occupied.clear();
@@ -205,11 +221,16 @@ impl<const D: usize> Bins<D> {
             .zip(keys.par_chunks(chunk))
             .enumerate()
             .for_each(|(c, (slots, keys))| {
-                for (i, &k) in keys.iter().enumerate() {
-                    let slot = &mut slots[k as usize];
+                let mut i = (c * chunk) as u32;
+                for (k, run) in runs(keys) {
+                    let slot = slots[k as usize] as usize;
                     // SAFETY: the prefix gave every (block, chunk) its own slots.
-                    unsafe { *order.at(*slot as usize) = (c * chunk + i) as u32 };
-                    *slot += 1;
+                    let place = unsafe { order.range(slot, run as usize) };
+                    for (o, p) in place.iter_mut().zip(i..) {
+                        *o = p;
+                    }
+                    slots[k as usize] += run;
+                    i += run;
                 }
             });
         // Colours, and the node blocks each occupied block touches (itself and its upper
