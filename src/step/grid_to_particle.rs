@@ -378,20 +378,23 @@ where
         Fields::PerBody(..) => None,
     };
     let any_rigid = rigid.iter().any(Option::is_some);
+    // Each particle's whole new state, built in registers: the stress and pressure stay zero
+    // for `finish` to fill, and `F` stays the identity when no `finish` updates it (MUSL).
     let gather = crate::cpu::inlined(
         #[inline(always)]
-        move |p: usize, u: &mut ParticleUpdate<D>| {
+        move |p: usize| -> ParticleUpdate<D> {
             let xp = position[p];
             let rigid_velocity = match any_rigid {
                 true => rigid.get(material[p] as usize).copied().flatten(),
                 false => None,
             };
             if let Some(v) = rigid_velocity {
-                u.position = xp + dt * v;
-                u.velocity = v;
-                u.affine = Matrix::zeros();
-                u.deformation_gradient = deformation_gradient[p];
-                return;
+                return ParticleUpdate {
+                    position: xp + dt * v,
+                    velocity: v,
+                    deformation_gradient: deformation_gradient[p],
+                    ..ParticleUpdate::default()
+                };
             }
             let (v, v_old) = one_field.unwrap_or_else(|| {
                 let nodes = fields.of(p);
@@ -405,18 +408,25 @@ where
                 Some(c) if MLS => c,
                 _ => g.gradient,
             };
-            u.position = xp + dt * v_pic;
-            u.velocity = if flip {
-                (1.0 - plan.flip) * v_pic + plan.flip * (velocity[p] + dv)
-            } else {
-                v_pic
-            };
-            if plan.apic {
-                u.affine = affine.unwrap_or(l);
-            }
-            if update_deformation {
-                u.deformation_gradient =
-                    (Matrix::<D>::identity() + dt * l) * deformation_gradient[p];
+            ParticleUpdate {
+                position: xp + dt * v_pic,
+                velocity: if flip {
+                    (1.0 - plan.flip) * v_pic + plan.flip * (velocity[p] + dv)
+                } else {
+                    v_pic
+                },
+                affine: if plan.apic {
+                    affine.unwrap_or(l)
+                } else {
+                    Matrix::zeros()
+                },
+                deformation_gradient: if update_deformation {
+                    (Matrix::<D>::identity() + dt * l) * deformation_gradient[p]
+                } else {
+                    Matrix::identity()
+                },
+                stress: Matrix::zeros(),
+                pressure: 0.0,
             }
         },
     );
@@ -431,16 +441,23 @@ where
                 #[inline(always)]
                 || {
                     let first = c * CHUNK;
-                    let mut updates = [ParticleUpdate::<D>::default(); CHUNK];
-                    for (k, u) in updates[..ok.len()].iter_mut().enumerate() {
-                        gather(first + k, u);
-                    }
-                    let mut speed = 0.0f64;
                     let n = ok.len();
+                    // Not initialised first: each slot is written whole by its gather.
+                    let mut slots = [std::mem::MaybeUninit::<ParticleUpdate<D>>::uninit(); CHUNK];
+                    for (k, u) in slots[..n].iter_mut().enumerate() {
+                        u.write(gather(first + k));
+                    }
+                    // SAFETY: the first `n` slots were written just above.
+                    let updates = unsafe {
+                        std::slice::from_raw_parts_mut(
+                            slots.as_mut_ptr().cast::<ParticleUpdate<D>>(),
+                            n,
+                        )
+                    };
+                    let mut speed = 0.0f64;
                     let mut speeds = [None; CHUNK];
-                    let whole = finish.is_some_and(|f| {
-                        f.finish_chunk(first, &mut updates[..n], &mut speeds[..n])
-                    });
+                    let whole =
+                        finish.is_some_and(|f| f.finish_chunk(first, updates, &mut speeds[..n]));
                     for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
                         let p = first + k;
                         // SAFETY: every particle index is visited by one task only.
