@@ -296,21 +296,68 @@ impl BSpline {
                 *d = mul(*d, inv_h);
             }
         }
-        let store = |out: &mut [[[f64; W]; D]], lanes: &[[__m256d; W]; D]| {
-            for a in 0..D {
-                for k in 0..W {
-                    let l: [f64; 4] = std::mem::transmute(lanes[a][k]);
-                    for (q, out) in out.iter_mut().enumerate() {
-                        out[a][k] = l[q];
-                    }
-                }
-            }
-        };
-        store(values, &w);
+        store_transposed(values, &w);
         if let Some(derivatives) = derivatives {
-            store(derivatives, &dw);
+            store_transposed(derivatives, &dw);
         }
         true
+    }
+}
+
+/// Stores factors held as lanes (`lanes[a][k]`, lane `q` for particle `q`) into the four
+/// particles' arrays (`out[q][a][k]`, `D · W` consecutive values each): four registers at a
+/// time transposed in registers and stored as four whole rows, a remaining pair as 2-lane
+/// stores, a last one value by value. Only data movement, so the same bits as storing each
+/// value. Storing every value on its own (24 scalar stores in 2D) held a quarter of the shape
+/// phase's samples on an Intel Xeon (BENCHMARKS.md, session 14).
+///
+/// # Safety
+/// The processor has AVX2 (inside [`crate::cpu::wide`]).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn store_transposed<const D: usize, const W: usize>(
+    out: &mut [[[f64; W]; D]],
+    lanes: &[[std::arch::x86_64::__m256d; W]; D],
+) {
+    use std::arch::x86_64::*;
+    assert!(out.len() == 4);
+    let count = D * W;
+    // SAFETY: `[[[f64; W]; D]; 4]` and `[[__m256d; W]; D]` are arrays of f64 and of registers
+    // without padding; `out` holds 4 · count values.
+    let r = std::slice::from_raw_parts(lanes.as_ptr() as *const __m256d, count);
+    let o = out.as_mut_ptr() as *mut f64;
+    let mut j = 0;
+    while j + 4 <= count {
+        let (t0, t1) = (
+            _mm256_unpacklo_pd(r[j], r[j + 1]),
+            _mm256_unpackhi_pd(r[j], r[j + 1]),
+        );
+        let (t2, t3) = (
+            _mm256_unpacklo_pd(r[j + 2], r[j + 3]),
+            _mm256_unpackhi_pd(r[j + 2], r[j + 3]),
+        );
+        _mm256_storeu_pd(o.add(j), _mm256_permute2f128_pd::<0x20>(t0, t2));
+        _mm256_storeu_pd(o.add(count + j), _mm256_permute2f128_pd::<0x20>(t1, t3));
+        _mm256_storeu_pd(o.add(2 * count + j), _mm256_permute2f128_pd::<0x31>(t0, t2));
+        _mm256_storeu_pd(o.add(3 * count + j), _mm256_permute2f128_pd::<0x31>(t1, t3));
+        j += 4;
+    }
+    if j + 2 <= count {
+        let (u0, u1) = (
+            _mm256_unpacklo_pd(r[j], r[j + 1]),
+            _mm256_unpackhi_pd(r[j], r[j + 1]),
+        );
+        _mm_storeu_pd(o.add(j), _mm256_castpd256_pd128(u0));
+        _mm_storeu_pd(o.add(count + j), _mm256_castpd256_pd128(u1));
+        _mm_storeu_pd(o.add(2 * count + j), _mm256_extractf128_pd::<1>(u0));
+        _mm_storeu_pd(o.add(3 * count + j), _mm256_extractf128_pd::<1>(u1));
+        j += 2;
+    }
+    if j < count {
+        let l: [f64; 4] = std::mem::transmute(r[j]);
+        for (q, value) in l.into_iter().enumerate() {
+            *o.add(q * count + j) = value;
+        }
     }
 }
 
