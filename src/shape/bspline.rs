@@ -180,8 +180,8 @@ impl BSpline {
 impl BSpline {
     /// [`BSpline::factors_into`] for four positions at once, as the lanes of AVX2 registers:
     /// the same operations in the same order for each, so the same bits. Returns false, having
-    /// written nothing, when some coordinate is not finite or lies 2^50 cells or more from the
-    /// origin (where the scalar floor saturates).
+    /// written nothing, when some coordinate is not finite or lies 2^30 cells or more from the
+    /// origin (the scalar code takes those).
     ///
     /// # Safety
     /// The processor has AVX2 (the caller runs this inside [`crate::cpu::wide`]).
@@ -235,20 +235,38 @@ impl BSpline {
             let derivative = sub(mul(mul(set(1.5), r), r), mul(set(2.0), r));
             (value, derivative)
         }
-        // Cell units, `(x − origin) / h`, per axis.
+        // The coordinates per axis as lanes: in 2D two loads of the four interleaved positions
+        // and a shuffle (`x0 y0 x1 y1 | x2 y2 x3 y3` → `x0 x1 x2 x3`, `y0 y1 y2 y3`), else
+        // value by value.
+        let mut coordinates = [set(0.0); D];
+        if D == 2 {
+            let p = x.as_ptr() as *const f64;
+            let (a, b) = (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4)));
+            coordinates[0] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpacklo_pd(a, b));
+            coordinates[1] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpackhi_pd(a, b));
+        } else {
+            for a in 0..D {
+                coordinates[a] = _mm256_set_pd(x[3][a], x[2][a], x[1][a], x[0][a]);
+            }
+        }
+        // Cell units, `(x − origin) / h`, per axis; within 2^30 cells of the origin, so that
+        // the first nodes convert to 32-bit integers exactly.
         let mut xi = [set(0.0); D];
         let mut inside = true;
         for a in 0..D {
-            let xa = _mm256_set_pd(x[3][a], x[2][a], x[1][a], x[0][a]);
-            xi[a] = _mm256_div_pd(sub(xa, set(grid.origin[a])), set(grid.cell_size));
+            xi[a] = _mm256_div_pd(
+                sub(coordinates[a], set(grid.origin[a])),
+                set(grid.cell_size),
+            );
             let magnitude = _mm256_andnot_pd(set(-0.0), xi[a]);
-            let limit = set((1u64 << 50) as f64);
+            let limit = set((1u64 << 30) as f64);
             inside &= _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(magnitude, limit)) == 0b1111;
         }
         if !inside {
             return false;
         }
         let inv_h = set(1.0 / grid.cell_size);
+        let mut first_lanes = [_mm256_setzero_si256(); D];
         let mut w = [[set(0.0); W]; D];
         let mut dw = [[set(0.0); W]; D];
         for a in 0..D {
@@ -259,10 +277,8 @@ impl BSpline {
                 BSplineOrder::Cubic => sub(floor(xi[a]), set(1.0)),
             };
             let t = sub(xi[a], f);
-            let lanes: [f64; 4] = std::mem::transmute(f);
-            for (k, first) in first.iter_mut().enumerate() {
-                first[a] = lanes[k] as i64;
-            }
+            // Exact: `f` is an integer below 2^30 in magnitude.
+            first_lanes[a] = _mm256_cvtepi32_epi64(_mm256_cvtpd_epi32(f));
             let (w, dw) = (&mut w[a], &mut dw[a]);
             match self.order {
                 BSplineOrder::Linear => {
@@ -294,6 +310,24 @@ impl BSpline {
             }
             for d in dw.iter_mut() {
                 *d = mul(*d, inv_h);
+            }
+        }
+        // The first nodes, `first[q][a]`: in 2D interleaved in registers and stored as two
+        // rows, else lane by lane.
+        if D == 2 {
+            let (lo, hi) = (
+                _mm256_unpacklo_epi64(first_lanes[0], first_lanes[1]),
+                _mm256_unpackhi_epi64(first_lanes[0], first_lanes[1]),
+            );
+            let o = first.as_mut_ptr() as *mut __m256i;
+            _mm256_storeu_si256(o, _mm256_permute2x128_si256::<0x20>(lo, hi));
+            _mm256_storeu_si256(o.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
+        } else {
+            for a in 0..D {
+                let lanes: [i64; 4] = std::mem::transmute(first_lanes[a]);
+                for (q, first) in first.iter_mut().enumerate() {
+                    first[a] = lanes[q];
+                }
             }
         }
         store_transposed(values, &w);

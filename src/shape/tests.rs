@@ -367,8 +367,8 @@ fn stencils_lie_in_their_box_and_factors_give_the_stored_bits() {
 /// Four positions as vector lanes (`BSpline::factors_4`) give the bits of one at a time
 /// (`BSpline::factors_into`): first node, values and derivatives, for every order in 2D and 3D,
 /// at random points, on nodes and cell centres, on and next to the faces (including the negative
-/// coordinates of the grid's origin); a coordinate that is not finite or too far out is refused
-/// with nothing written.
+/// coordinates of the grid's origin) and up to 2^30 cells away; a coordinate that is not finite
+/// or 2^30 cells or more out is refused with nothing written.
 #[test]
 fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
     fn check<const D: usize, const W: usize>(order: BSplineOrder) {
@@ -380,6 +380,15 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
         let grid = grid_for::<D>(&shape);
         let mut rng = TestRng::new(11);
         let mut points = sample_points(&grid, &mut rng);
+        // Far from the origin on both sides, inside the lanes' 2^30 cells (the first nodes
+        // convert through 32-bit integers, negative ones included).
+        for cells in [-1073741000.3, -536870912.7, 536870911.6, 1073741000.2] {
+            for _ in 0..4 {
+                points.push(Vector::<D>::from_fn(|a, _| {
+                    grid.origin[a] + (cells + a as f64 * 0.25) * grid.cell_size
+                }));
+            }
+        }
         // Nodes, cell centres and the points a rounding away from them.
         for k in 0..8 {
             let t = 0.5 * k as f64;
@@ -413,7 +422,9 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
                 );
             }
         }
-        for bad in [f64::NAN, f64::INFINITY, 1e300] {
+        // Not finite, or 2^30 cells or more from the origin: left to the scalar code.
+        let far = (1u64 << 30) as f64 * grid.cell_size;
+        for bad in [f64::NAN, f64::INFINITY, 1e300, grid.origin[D - 1] - far] {
             let mut x = [Vector::<D>::from_element(0.1); 4];
             x[2][D - 1] = bad;
             let mut first = [[7i64; D]; 4];
