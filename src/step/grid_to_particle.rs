@@ -22,8 +22,7 @@ pub struct ParticleUpdate<const D: usize> {
 }
 
 impl<const D: usize> Default for ParticleUpdate<D> {
-    // Inlined into the chunk loops (compiled for AVX2): out of line, its stores and the loads
-    // that copy it into the chunk's array stalled.
+    // Inlined into the gather (compiled for AVX2), which fills each new state whole from it.
     #[inline(always)]
     fn default() -> Self {
         ParticleUpdate {
@@ -425,8 +424,7 @@ where
                 } else {
                     Matrix::identity()
                 },
-                stress: Matrix::zeros(),
-                pressure: 0.0,
+                ..ParticleUpdate::default()
             }
         },
     );
