@@ -192,7 +192,7 @@ impl BSpline {
         &self,
         grid: &Grid<D>,
         x: &[Vector<D>],
-        first: &mut [[i64; D]],
+        first: &mut [[i32; D]],
         values: &mut [[[f64; W]; D]],
         derivatives: Option<&mut [[[f64; W]; D]]>,
     ) -> bool {
@@ -266,7 +266,7 @@ impl BSpline {
             return false;
         }
         let inv_h = set(1.0 / grid.cell_size);
-        let mut first_lanes = [_mm256_setzero_si256(); D];
+        let mut first_lanes = [_mm_setzero_si128(); D];
         let mut w = [[set(0.0); W]; D];
         let mut dw = [[set(0.0); W]; D];
         for a in 0..D {
@@ -278,7 +278,7 @@ impl BSpline {
             };
             let t = sub(xi[a], f);
             // Exact: `f` is an integer below 2^30 in magnitude.
-            first_lanes[a] = _mm256_cvtepi32_epi64(_mm256_cvtpd_epi32(f));
+            first_lanes[a] = _mm256_cvtpd_epi32(f);
             let (w, dw) = (&mut w[a], &mut dw[a]);
             match self.order {
                 BSplineOrder::Linear => {
@@ -315,16 +315,12 @@ impl BSpline {
         // The first nodes, `first[q][a]`: in 2D interleaved in registers and stored as two
         // rows, else lane by lane.
         if D == 2 {
-            let (lo, hi) = (
-                _mm256_unpacklo_epi64(first_lanes[0], first_lanes[1]),
-                _mm256_unpackhi_epi64(first_lanes[0], first_lanes[1]),
-            );
-            let o = first.as_mut_ptr() as *mut __m256i;
-            _mm256_storeu_si256(o, _mm256_permute2x128_si256::<0x20>(lo, hi));
-            _mm256_storeu_si256(o.add(1), _mm256_permute2x128_si256::<0x31>(lo, hi));
+            let o = first.as_mut_ptr() as *mut __m128i;
+            _mm_storeu_si128(o, _mm_unpacklo_epi32(first_lanes[0], first_lanes[1]));
+            _mm_storeu_si128(o.add(1), _mm_unpackhi_epi32(first_lanes[0], first_lanes[1]));
         } else {
             for a in 0..D {
-                let lanes: [i64; 4] = std::mem::transmute(first_lanes[a]);
+                let lanes: [i32; 4] = std::mem::transmute(first_lanes[a]);
                 for (q, first) in first.iter_mut().enumerate() {
                     first[a] = lanes[q];
                 }

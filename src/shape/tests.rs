@@ -399,7 +399,7 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
             }
         }
         for x in points.chunks_exact(4) {
-            let mut first = [[0i64; D]; 4];
+            let mut first = [[0i32; D]; 4];
             let mut values = [[[0.0; W]; D]; 4];
             let mut derivatives = [[[0.0; W]; D]; 4];
             // SAFETY: the processor has AVX2.
@@ -412,7 +412,7 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
             for (q, xq) in x.iter().enumerate() {
                 let (mut f, mut w, mut dw) = ([0i64; D], [[0.0; W]; D], [[0.0; W]; D]);
                 shape.factors_into(&grid, xq, &mut f, &mut w, Some(&mut dw));
-                assert_eq!(first[q], f, "{order:?} first node at {xq:?}");
+                assert_eq!(first[q].map(i64::from), f, "{order:?} first node at {xq:?}");
                 let bits = |v: &[[f64; W]; D]| v.map(|r| r.map(f64::to_bits));
                 assert_eq!(bits(&values[q]), bits(&w), "{order:?} values at {xq:?}");
                 assert_eq!(
@@ -427,14 +427,14 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
         for bad in [f64::NAN, f64::INFINITY, 1e300, grid.origin[D - 1] - far] {
             let mut x = [Vector::<D>::from_element(0.1); 4];
             x[2][D - 1] = bad;
-            let mut first = [[7i64; D]; 4];
+            let mut first = [[7i32; D]; 4];
             let mut values = [[[7.0; W]; D]; 4];
             // SAFETY: as above.
             let taken = unsafe {
                 crate::cpu::wide(|| shape.factors_4(&grid, &x, &mut first, &mut values, None))
             };
             assert!(!taken, "{order:?} took {bad}");
-            assert_eq!((first, values), ([[7i64; D]; 4], [[[7.0; W]; D]; 4]));
+            assert_eq!((first, values), ([[7i32; D]; 4], [[[7.0; W]; D]; 4]));
         }
     }
     check::<2, 2>(BSplineOrder::Linear);
