@@ -166,6 +166,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                     plan,
                     dt,
                     None::<&NoFinish>,
+                    None,
                     &mut new,
                     &mut admissible,
                 )

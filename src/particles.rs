@@ -213,27 +213,28 @@ impl<const D: usize> Particles<D> {
     /// buffers (kept between calls, so a permutation allocates nothing once they have grown).
     pub fn permute(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
         assert_eq!(order.len(), self.len(), "a permutation of the particles");
-        fn gather<T: Copy + Send + Sync>(v: &mut Vec<T>, spare: &mut Vec<T>, order: &[u32]) {
-            if v.is_empty() {
-                return;
-            }
-            spare.clear();
-            spare.par_extend(order.par_iter().map(|&p| v[p as usize]));
-            std::mem::swap(v, spare);
-        }
+        let s = &mut *spare;
+        permute_array(&mut self.position, &mut s.vectors, order);
+        permute_array(&mut self.velocity, &mut s.vectors, order);
+        permute_array(&mut self.deformation_gradient, &mut s.matrices, order);
+        permute_array(&mut self.stress, &mut s.matrices, order);
+        permute_array(&mut self.affine, &mut s.matrices, order);
+        permute_array(&mut self.pressure, &mut s.scalars, order);
+        self.permute_carried(order, spare);
+    }
+
+    /// [`Particles::permute`] of the quantities a step carries unchanged (the reference
+    /// position and volume, the mass, the material, the id and the history), for a step whose
+    /// grid to particle wrote the others in `order` already.
+    pub fn permute_carried(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
+        assert_eq!(order.len(), self.len(), "a permutation of the particles");
         let s = spare;
-        gather(&mut self.position, &mut s.vectors, order);
-        gather(&mut self.reference_position, &mut s.vectors, order);
-        gather(&mut self.velocity, &mut s.vectors, order);
-        gather(&mut self.deformation_gradient, &mut s.matrices, order);
-        gather(&mut self.stress, &mut s.matrices, order);
-        gather(&mut self.affine, &mut s.matrices, order);
-        gather(&mut self.reference_volume, &mut s.scalars, order);
-        gather(&mut self.mass, &mut s.scalars, order);
-        gather(&mut self.pressure, &mut s.scalars, order);
-        gather(&mut self.material, &mut s.indices, order);
-        gather(&mut self.id, &mut s.indices, order);
-        gather(&mut self.plastic, &mut s.plastic, order);
+        permute_array(&mut self.reference_position, &mut s.vectors, order);
+        permute_array(&mut self.reference_volume, &mut s.scalars, order);
+        permute_array(&mut self.mass, &mut s.scalars, order);
+        permute_array(&mut self.material, &mut s.indices, order);
+        permute_array(&mut self.id, &mut s.indices, order);
+        permute_array(&mut self.plastic, &mut s.plastic, order);
     }
 
     /// Total linear momentum `Σ m_p v_p`.
@@ -254,4 +255,14 @@ impl<const D: usize> Particles<D> {
             .map(|(m, v)| m * v.norm_squared())
             .sum::<f64>()
     }
+}
+
+/// `v` in `order` (`v[order[k]]` at `k`), gathered into `spare`, which takes the old storage.
+fn permute_array<T: Copy + Send + Sync>(v: &mut Vec<T>, spare: &mut Vec<T>, order: &[u32]) {
+    if v.is_empty() {
+        return;
+    }
+    spare.clear();
+    spare.par_extend(order.par_iter().map(|&p| v[p as usize]));
+    std::mem::swap(v, spare);
 }

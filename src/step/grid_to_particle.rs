@@ -256,15 +256,16 @@ pub trait Finish<const D: usize>: Sync {
         history: &mut PlasticState,
     ) -> Option<f64>;
 
-    /// [`Finish::finish`] for the particles `first..first + us.len()` (a chunk of grid to
-    /// particle, at most 8) at once, when the chunk allows it (all of one elastic material,
-    /// say): fills `speeds` with what `finish` would return for each and returns true. Returns
-    /// false, having changed nothing, when the chunk has to be finished particle by particle.
-    /// Each particle's result is the same bits as `finish` gives it.
+    /// [`Finish::finish`] for the particles `particles` (a chunk of grid to particle, at most
+    /// 8, `us[k]` the new state of particle `particles[k]`) at once, when the chunk allows it
+    /// (all of one elastic material, say): fills `speeds` with what `finish` would return for
+    /// each and returns true. Returns false, having changed nothing, when the chunk has to be
+    /// finished particle by particle. Each particle's result is the same bits as `finish`
+    /// gives it.
     #[inline(always)]
     fn finish_chunk(
         &self,
-        _first: usize,
+        _particles: &[usize],
         _us: &mut [ParticleUpdate<D>],
         _speeds: &mut [Option<f64>],
     ) -> bool {
@@ -309,6 +310,11 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map). Particles of
 /// a rigid material (`rigid[material]` is its velocity) move with it and keep their `F`.
 ///
+/// `source`, when given, reorders the particles as it goes: slot `k` of the new state (and of
+/// `admissible`) is particle `source[k]` (a permutation). The step stores its particles in the
+/// order of their grid blocks this way: the new state comes out sorted, and only the quantities
+/// a step does not change are permuted afterwards ([`Particles::permute_carried`]).
+///
 /// `finish(p, u, history)`, when given, completes particle `p`'s new state while it is in
 /// registers (the constitutive update and the checks under USL; `history` is its new history
 /// slot, or scratch for particles without one) and says whether it is admissible; `admissible`
@@ -324,20 +330,25 @@ pub fn grid_to_particle<const D: usize, F>(
     plan: TransferPlan,
     dt: f64,
     finish: Option<&F>,
+    source: Option<&[u32]>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
 ) -> f64
 where
     F: Finish<D>,
 {
-    // One compiled pass per case: MLS takes no gradient sum.
+    if let Some(source) = source {
+        assert_eq!(source.len(), ps.len(), "a permutation of the particles");
+    }
+    // One compiled pass per case: MLS takes no gradient sum. (One per `source` too made no
+    // difference: the slot's particle is read once per chunk.)
     if plan.mls {
         gather_all::<true, D, F>(
-            grid, ps, stencils, fields, rigid, plan, dt, finish, new, admissible,
+            grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,
         )
     } else {
         gather_all::<false, D, F>(
-            grid, ps, stencils, fields, rigid, plan, dt, finish, new, admissible,
+            grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,
         )
     }
 }
@@ -353,6 +364,7 @@ fn gather_all<const MLS: bool, const D: usize, F>(
     plan: TransferPlan,
     dt: f64,
     finish: Option<&F>,
+    source: Option<&[u32]>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
 ) -> f64
@@ -440,10 +452,16 @@ where
                 || {
                     let first = c * CHUNK;
                     let n = ok.len();
+                    // The particle of each slot of the chunk.
+                    let mut particles = [0usize; CHUNK];
+                    for (k, p) in particles[..n].iter_mut().enumerate() {
+                        *p = source.map_or(first + k, |s| s[first + k] as usize);
+                    }
+                    let particles = &particles[..n];
                     // Not initialised first: each slot is written whole by its gather.
                     let mut slots = [std::mem::MaybeUninit::<ParticleUpdate<D>>::uninit(); CHUNK];
-                    for (k, u) in slots[..n].iter_mut().enumerate() {
-                        u.write(gather(first + k));
+                    for (u, &p) in slots[..n].iter_mut().zip(particles) {
+                        u.write(gather(p));
                     }
                     // SAFETY: the first `n` slots were written just above.
                     let updates = unsafe {
@@ -454,21 +472,23 @@ where
                     };
                     let mut speed = 0.0f64;
                     let mut speeds = [None; CHUNK];
-                    let whole =
-                        finish.is_some_and(|f| f.finish_chunk(first, updates, &mut speeds[..n]));
+                    let whole = finish
+                        .is_some_and(|f| f.finish_chunk(particles, updates, &mut speeds[..n]));
                     for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
-                        let p = first + k;
-                        // SAFETY: every particle index is visited by one task only.
+                        let slot = first + k;
+                        // SAFETY: every slot is visited by one task only.
                         let finished = match finish {
                             _ if whole => speeds[k],
-                            Some(f) => {
-                                f.finish(p, u, unsafe { writer.plastic(p) }.unwrap_or(scratch))
-                            }
+                            Some(f) => f.finish(
+                                particles[k],
+                                u,
+                                unsafe { writer.plastic(slot) }.unwrap_or(scratch),
+                            ),
                             None => Some(0.0),
                         };
                         *ok = finished.is_some();
                         speed = speed.max(finished.unwrap_or(0.0));
-                        unsafe { writer.store(p, u) };
+                        unsafe { writer.store(slot, u) };
                     }
                     speed
                 },

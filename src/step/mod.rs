@@ -66,6 +66,10 @@ pub struct Workspace<const D: usize> {
     pub keep_order: bool,
     /// Buffers of the particles' sort.
     pub spare: crate::particles::SpareArrays<D>,
+    /// How the step being taken stores its particles in block order (decided with its bins).
+    pub reorder: Reorder,
+    /// Permute every quantity at the commit even under USL (tests compare the two ways).
+    pub reorder_at_commit: bool,
     /// `max_p (c_p + |v_p|)` of the particles as they are, when the last step computed it with
     /// their new state (`None` after anything else changed them: `Sim::signal_speed` then takes
     /// it afresh); and the value of the step being taken, which its commit makes current.
@@ -91,6 +95,21 @@ pub struct Workspace<const D: usize> {
     pub new_state: NewState<D>,
     /// Whether each new particle state passed the checks.
     pub admissible: Vec<bool>,
+}
+
+/// How a step stores its particles in the order of their grid blocks, once they have scattered
+/// over them (`Bins::is_scattered`).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub enum Reorder {
+    /// Not this step: still sorted enough, or sorting is off.
+    #[default]
+    No,
+    /// Grid to particle writes the new state in block order, and the commit permutes only the
+    /// quantities a step carries unchanged (USL): a fifth of the bytes of a whole permutation.
+    InGather,
+    /// The commit permutes every quantity (MUSL, whose second map reads the new state by the
+    /// particles' old slots).
+    AtCommit,
 }
 
 /// The new state of one boundary point.
@@ -573,9 +592,15 @@ impl<const D: usize> Sim<D> {
         };
         let mut admissible = std::mem::take(&mut work.admissible);
 
-        // 5. Grid to particle.
+        // 5. Grid to particle, in block order when the particles have scattered (USL).
         let mut new = std::mem::take(&mut work.new_state);
         let usl = self.options.scheme == Scheme::Usl;
+        work.reorder = match !work.keep_order && work.bins.is_scattered() {
+            false => Reorder::No,
+            true if usl && !work.reorder_at_commit => Reorder::InGather,
+            true => Reorder::AtCommit,
+        };
+        let source = (work.reorder == Reorder::InGather).then_some(&work.bins.order[..]);
         let fields = if contact.is_some() {
             Fields::PerBody(&work.bodies, &ps.material)
         } else {
@@ -590,6 +615,7 @@ impl<const D: usize> Sim<D> {
             plan,
             dt,
             usl.then_some(&finish),
+            source,
             &mut new,
             &mut admissible,
         );
@@ -694,17 +720,19 @@ impl<const D: usize> Sim<D> {
             work.times.constitutive += lap(&mut clock);
         }
 
-        // Checks: the first bad particle (lowest id) is reported.
+        // Checks: the first bad particle (lowest id) is reported; slot `k` of the new state
+        // holds particle `source[k]`.
+        let id_of = |k: usize| ps.id[source.map_or(k, |s| s[k] as usize)];
         let bad = admissible
             .iter()
             .enumerate()
             .filter(|(_, ok)| !**ok)
-            .min_by_key(|&(p, _)| ps.id[p])
-            .map(|(p, _)| p);
+            .min_by_key(|&(k, _)| id_of(k))
+            .map(|(k, _)| k);
         work.admissible = admissible;
-        if let Some(p) = bad {
-            let (kind, what) = new.get(p).check(&grid.domain()).unwrap_err();
-            let id = ps.id[p];
+        if let Some(k) = bad {
+            let (kind, what) = new.get(k).check(&grid.domain()).unwrap_err();
+            let id = id_of(k);
             let message = format!(
                 "step {} (t = {:e}, dt = {dt:e}) rejected: particle {id} {what}; the simulation keeps its last good state",
                 self.steps + 1,
@@ -769,6 +797,12 @@ impl<const D: usize> Sim<D> {
         if new.affine.len() == ps.affine.len() {
             std::mem::swap(&mut ps.affine, &mut new.affine);
         }
+        // The new state came out in block order: the rest follows it, history included (of
+        // which the history particles' new one is copied in next).
+        let order = &self.work.bins.order;
+        if self.work.reorder == Reorder::InGather {
+            ps.permute_carried(order, &mut self.work.spare);
+        }
         let materials = &self.materials;
         ps.plastic
             .par_iter_mut()
@@ -777,10 +811,8 @@ impl<const D: usize> Sim<D> {
             .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
             .for_each(|((state, _), new)| *state = *new);
         self.work.signal_speed = Some(self.work.new_signal_speed);
-        // Particles stored in the order of their blocks, when they have scattered.
-        if !self.work.keep_order && self.work.bins.is_scattered() {
-            self.particles
-                .permute(&self.work.bins.order, &mut self.work.spare);
+        if self.work.reorder == Reorder::AtCommit {
+            ps.permute(order, &mut self.work.spare);
         }
         let b = &mut self.boundary;
         for (k, u) in self.work.boundary_updates.iter().enumerate() {
@@ -845,14 +877,14 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
     #[inline(always)]
     fn finish_chunk(
         &self,
-        first: usize,
+        particles: &[usize],
         us: &mut [ParticleUpdate<D>],
         speeds: &mut [Option<f64>],
     ) -> bool {
         let n = us.len();
         let ps = self.particles;
-        let id = ps.material[first];
-        if ps.material[first..first + n].iter().any(|&m| m != id) {
+        let id = ps.material[particles[0]];
+        if particles.iter().any(|&p| ps.material[p] != id) {
             return false;
         }
         let crate::material::Material::NeoHookean(m) = &self.materials[id as usize] else {

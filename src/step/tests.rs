@@ -819,7 +819,8 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             assert_eq!(alone[3].position[0], 0.0);
             let mut together = updates[..len].to_vec();
             let mut speeds = vec![Some(-1.0); len];
-            assert!(finish.finish_chunk(0, &mut together, &mut speeds));
+            let particles: Vec<usize> = (0..len).collect();
+            assert!(finish.finish_chunk(&particles, &mut together, &mut speeds));
             assert_eq!(speeds, expected, "{D}D, {len} particles");
             for (a, b) in alone.iter().zip(&together) {
                 assert_eq!(a.stress, b.stress);
@@ -833,7 +834,9 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
         inverted[2].deformation_gradient[(1, 1)] = 1.0;
         let mut speeds = vec![None; CHUNK];
         let before = inverted.clone();
-        assert!(!finish.finish_chunk(0, &mut inverted, &mut speeds));
+        let (first, second): (Vec<usize>, Vec<usize>) =
+            ((0..CHUNK).collect(), (CHUNK..2 * CHUNK).collect());
+        assert!(!finish.finish_chunk(&first, &mut inverted, &mut speeds));
         assert_eq!(inverted, before);
         let mut mixed = ps.clone();
         mixed.material[CHUNK + 1] = soil;
@@ -842,13 +845,13 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             ..finish
         };
         let mut chunk = updates[CHUNK..].to_vec();
-        assert!(!finish_mixed.finish_chunk(CHUNK, &mut chunk, &mut speeds));
+        assert!(!finish_mixed.finish_chunk(&second, &mut chunk, &mut speeds));
         mixed.material.fill(soil);
         let finish_soil = super::ConstitutiveUpdate {
             particles: &mixed,
             ..finish
         };
-        assert!(!finish_soil.finish_chunk(CHUNK, &mut chunk, &mut speeds));
+        assert!(!finish_soil.finish_chunk(&second, &mut chunk, &mut speeds));
     }
     check::<2>();
     check::<3>();
@@ -1260,6 +1263,68 @@ fn sorting_the_particles_changes_only_round_off() {
         eprintln!("{field:?}: sorted against unsorted {worst:e} of {scale:e}");
         assert!(worst <= 1e-12 * scale, "{field:?}: {worst:e} of {scale:e}");
     }
+}
+
+/// Under USL grid to particle writes the new state in block order and the commit permutes only
+/// what a step carries unchanged (`Reorder::InGather`); that is the same, bit for bit, as
+/// permuting everything at the commit: every particle array (ids, materials, history of the
+/// plastic half included) after steps that sorted. Particles added column by column, so the first
+/// step sorts; a rotating block of an elastic and a Drucker–Prager half under gravity (the soil
+/// yields, so its history moves with it).
+#[test]
+fn sorting_in_grid_to_particle_is_sorting_at_the_commit() {
+    let q = 1.0 / 64.0;
+    let added: Vec<Vector<2>> = (0..32)
+        .flat_map(|i| {
+            (0..32).map(move |j| {
+                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
+            })
+        })
+        .collect();
+    let run = |at_commit: bool| {
+        let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
+        sim.work.reorder_at_commit = at_commit;
+        let solid = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
+        let soil =
+            sim.add_material(Material::drucker_prager(2000.0, YOUNG, 0.3, 30.0, 0.0, 0.0).unwrap());
+        sim.set_gravity(Vector::<2>::new(0.0, -9.81)).unwrap();
+        for (m, left) in [(solid, true), (soil, false)] {
+            let x: Vec<Vector<2>> = added
+                .iter()
+                .copied()
+                .filter(|x| (x[0] < 0.5) == left)
+                .collect();
+            let v: Vec<Vector<2>> = x
+                .iter()
+                .map(|x| Vector::<2>::new(-(x[1] - 0.5), x[0] - 0.5))
+                .collect();
+            sim.add_particles(m, &x, &vec![q * q; x.len()], Some(&v))
+                .unwrap();
+        }
+        let dt = sim.stable_dt(0.3).unwrap();
+        let mut in_gather = 0;
+        for _ in 0..20 {
+            sim.step(dt).unwrap();
+            in_gather += usize::from(sim.work.reorder == super::Reorder::InGather);
+        }
+        (sim, in_gather)
+    };
+    let ((gathered, in_gather), (committed, none)) = (run(false), run(true));
+    assert!(
+        in_gather >= 1 && none == 0,
+        "{in_gather} sorts in grid to particle"
+    );
+    assert!(
+        !gathered.particles().in_id_order(),
+        "the particles were not sorted"
+    );
+    let yielded = gathered
+        .particles()
+        .plastic
+        .iter()
+        .filter(|s| s.plastic_strain > 0.0);
+    assert!(yielded.count() > 0, "the soil did not yield");
+    assert_eq!(gathered.particles(), committed.particles());
 }
 
 /// A step computes `max_p (c_p + |v_p|)` of the new state while it has it in registers, and the
