@@ -189,7 +189,10 @@ impl<const D: usize> Bins<D> {
         // chunks of the particles: each chunk counts its keys, a prefix over (block, chunk)
         // gives each chunk its slots in every block, and the chunks place their particles at
         // once. A stable sort has one result, so the order does not depend on the chunks.
-        let chunk = n.div_ceil(rayon::current_num_threads().max(1)).max(1 << 14);
+        // Chunks of at least 2^17 particles: below that the sort runs on one thread, as each
+        // parallel pass costs more than it saves there (2D MLS, 10^5 particles, two threads on
+        // an Intel Xeon KVM guest: bins 1.49-1.55 -> 0.85-0.90 ns per particle-step with 2^14).
+        let chunk = n.div_ceil(rayon::current_num_threads().max(1)).max(1 << 17);
         let chunks = n.div_ceil(chunk).max(1);
         self.counts.clear();
         self.counts.resize(chunks * total, 0);
