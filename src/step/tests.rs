@@ -1034,6 +1034,33 @@ fn check_tasks(
     assert!(seen.iter().all(|&c| c == 1));
 }
 
+/// The counting sort of the bins in chunks (over 2^17 particles per chunk, one per thread) gives
+/// the stable order by block: the particles of a block in index order, the blocks ascending.
+#[test]
+fn bins_sorted_in_chunks_are_the_stable_order() {
+    use crate::step::{Bins, BlockLayout};
+    let grid = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [600, 40], 0.1).unwrap();
+    let layout = BlockLayout::new(3, &grid);
+    let mut rng = crate::shape::UniformRng::new(11);
+    let n = 400_000;
+    // Runs of one block (as sorted particles have) and single strays.
+    let mut keys = Vec::with_capacity(n);
+    while keys.len() < n {
+        let key = (rng.uniform() * 50.0) as u32; // of the 55 blocks
+        let run = if rng.uniform() < 0.5 {
+            1
+        } else {
+            1 + (rng.uniform() * 300.0) as usize
+        };
+        keys.extend(std::iter::repeat_n(key, run.min(n - keys.len())));
+    }
+    let mut bins = Bins::<2>::default();
+    bins.compute_from_keys(&layout, &keys);
+    let mut expected: Vec<u32> = (0..n as u32).collect();
+    expected.sort_by_key(|&p| keys[p as usize]);
+    assert_eq!(bins.order, expected);
+}
+
 /// The bins hold every particle once, in index order within a block; blocks of one colour are
 /// two blocks apart along some axis, so the stencils of their particles never share a node.
 #[test]
