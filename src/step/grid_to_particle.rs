@@ -319,7 +319,8 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// registers (the constitutive update and the checks under USL; `history` is its new history
 /// slot, or scratch for particles without one) and says whether it is admissible; `admissible`
 /// receives that (true for every particle without `finish`). The new states go to `new`.
-/// Returns the largest signal speed `finish` gave (0 without `finish`).
+/// Returns the largest signal speed `finish` gave (0 without `finish`) and whether every new
+/// state is admissible (so that the checks scan `admissible` only when one is not).
 #[allow(clippy::too_many_arguments)]
 pub fn grid_to_particle<const D: usize, F>(
     grid: &Grid<D>,
@@ -333,7 +334,7 @@ pub fn grid_to_particle<const D: usize, F>(
     source: Option<&[u32]>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
-) -> f64
+) -> (f64, bool)
 where
     F: Finish<D>,
 {
@@ -367,7 +368,7 @@ fn gather_all<const MLS: bool, const D: usize, F>(
     source: Option<&[u32]>,
     new: &mut NewState<D>,
     admissible: &mut Vec<bool>,
-) -> f64
+) -> (f64, bool)
 where
     F: Finish<D>,
 {
@@ -470,7 +471,7 @@ where
                             n,
                         )
                     };
-                    let mut speed = 0.0f64;
+                    let (mut speed, mut all_admissible) = (0.0f64, true);
                     let mut speeds = [None; CHUNK];
                     let whole = finish
                         .is_some_and(|f| f.finish_chunk(particles, updates, &mut speeds[..n]));
@@ -487,12 +488,13 @@ where
                             None => Some(0.0),
                         };
                         *ok = finished.is_some();
+                        all_admissible &= *ok;
                         speed = speed.max(finished.unwrap_or(0.0));
                         unsafe { writer.store(slot, u) };
                     }
-                    speed
+                    (speed, all_admissible)
                 },
             )
         })
-        .reduce(|| 0.0, f64::max)
+        .reduce(|| (0.0, true), |a, b| (a.0.max(b.0), a.1 && b.1))
 }

@@ -606,7 +606,7 @@ impl<const D: usize> Sim<D> {
         } else {
             Fields::One(&work.nodes)
         };
-        let mut speed = grid_to_particle(
+        let (mut speed, mut all_admissible) = grid_to_particle(
             grid,
             ps,
             stencils,
@@ -702,7 +702,7 @@ impl<const D: usize> Sim<D> {
             let writer = new.writer();
             admissible.clear();
             admissible.resize(ps.len(), false);
-            speed = admissible
+            (speed, all_admissible) = admissible
                 .par_iter_mut()
                 .enumerate()
                 .map_init(PlasticState::default, |scratch, (p, ok)| {
@@ -713,22 +713,25 @@ impl<const D: usize> Sim<D> {
                             finish.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
                         writer.store(p, &u);
                         *ok = finished.is_some();
-                        finished.unwrap_or(0.0)
+                        (finished.unwrap_or(0.0), *ok)
                     }
                 })
-                .reduce(|| 0.0, f64::max);
+                .reduce(|| (0.0, true), |a, b| (a.0.max(b.0), a.1 && b.1));
             work.times.constitutive += lap(&mut clock);
         }
 
         // Checks: the first bad particle (lowest id) is reported; slot `k` of the new state
         // holds particle `source[k]`.
         let id_of = |k: usize| ps.id[source.map_or(k, |s| s[k] as usize)];
-        let bad = admissible
-            .iter()
-            .enumerate()
-            .filter(|(_, ok)| !**ok)
-            .min_by_key(|&(k, _)| id_of(k))
-            .map(|(k, _)| k);
+        let bad = match all_admissible {
+            true => None,
+            false => admissible
+                .iter()
+                .enumerate()
+                .filter(|(_, ok)| !**ok)
+                .min_by_key(|&(k, _)| id_of(k))
+                .map(|(k, _)| k),
+        };
         work.admissible = admissible;
         if let Some(k) = bad {
             let (kind, what) = new.get(k).check(&grid.domain()).unwrap_err();
