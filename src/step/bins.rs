@@ -303,7 +303,14 @@ impl<const D: usize> Bins<D> {
     /// the particles in `order` ([`crate::particles::Particles::permute`]), after which `order`
     /// is one run per block's worth of particles until they move to other blocks.
     pub fn is_scattered(&self) -> bool {
-        let breaks = self.order.windows(2).filter(|w| w[1] != w[0] + 1).count();
+        let (order, next) = (&self.order[..], self.order.get(1..).unwrap_or_default());
+        let breaks: usize = crate::cpu::wide(
+            #[inline(always)]
+            || {
+                let steps = order.iter().zip(next);
+                steps.map(|(&a, &b)| usize::from(b != a.wrapping_add(1))).sum()
+            },
+        );
         breaks * SORTED_RUN > self.order.len()
     }
 

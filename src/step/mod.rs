@@ -363,6 +363,9 @@ impl<const D: usize> Sim<D> {
         let rigid: Vec<Option<Vector<D>>> =
             self.materials.iter().map(|m| m.rigid_velocity()).collect();
         let mut clock = std::time::Instant::now();
+        // Whether to store the particles in block order this step (with the bins' time).
+        let scattered = !work.keep_order && work.bins.is_scattered();
+        work.times.bins += lap(&mut clock);
 
         // 2. Body forces.
         let body = match self.body_force.as_mut() {
@@ -595,7 +598,7 @@ impl<const D: usize> Sim<D> {
         // 5. Grid to particle, in block order when the particles have scattered (USL).
         let mut new = std::mem::take(&mut work.new_state);
         let usl = self.options.scheme == Scheme::Usl;
-        work.reorder = match !work.keep_order && work.bins.is_scattered() {
+        work.reorder = match scattered {
             false => Reorder::No,
             true if usl && !work.reorder_at_commit => Reorder::InGather,
             true => Reorder::AtCommit,
