@@ -308,7 +308,9 @@ impl<const D: usize> Bins<D> {
             #[inline(always)]
             || {
                 let steps = order.iter().zip(next);
-                steps.map(|(&a, &b)| usize::from(b != a.wrapping_add(1))).sum()
+                steps
+                    .map(|(&a, &b)| usize::from(b != a.wrapping_add(1)))
+                    .sum()
             },
         );
         breaks * SORTED_RUN > self.order.len()

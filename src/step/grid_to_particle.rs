@@ -256,16 +256,15 @@ pub trait Finish<const D: usize>: Sync {
         history: &mut PlasticState,
     ) -> Option<f64>;
 
-    /// [`Finish::finish`] for the particles `particles` (a chunk of grid to particle, at most
-    /// 8, `us[k]` the new state of particle `particles[k]`) at once, when the chunk allows it
-    /// (all of one elastic material, say): fills `speeds` with what `finish` would return for
-    /// each and returns true. Returns false, having changed nothing, when the chunk has to be
-    /// finished particle by particle. Each particle's result is the same bits as `finish`
-    /// gives it.
+    /// [`Finish::finish`] for the particles of a chunk of grid to particle (at most 8, `us[k]`
+    /// the new state of particle `chunk.particle(k)`) at once, when the chunk allows it (all of
+    /// one elastic material, say): fills `speeds` with what `finish` would return for each and
+    /// returns true. Returns false, having changed nothing, when the chunk has to be finished
+    /// particle by particle. Each particle's result is the same bits as `finish` gives it.
     #[inline(always)]
     fn finish_chunk(
         &self,
-        _particles: &[usize],
+        _chunk: Chunk<'_>,
         _us: &mut [ParticleUpdate<D>],
         _speeds: &mut [Option<f64>],
     ) -> bool {
@@ -277,6 +276,37 @@ pub trait Finish<const D: usize>: Sync {
 /// updates and stores. Each loop is short, so the processor overlaps consecutive particles' long
 /// dependency chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
 pub(crate) const CHUNK: usize = 8;
+
+/// The particles of a chunk of grid to particle: slots `first..first + len`, each holding
+/// particle `source[slot]`, or the particle of the slot's index without `source`.
+#[derive(Clone, Copy)]
+pub struct Chunk<'a> {
+    pub first: usize,
+    pub len: usize,
+    pub source: Option<&'a [u32]>,
+}
+
+impl Chunk<'_> {
+    /// The particle of the chunk's slot `k`.
+    #[inline(always)]
+    pub fn particle(&self, k: usize) -> usize {
+        match self.source {
+            Some(s) => s[self.first + k] as usize,
+            None => self.first + k,
+        }
+    }
+
+    /// Whether `f` holds for the particle of every slot of the chunk.
+    #[inline(always)]
+    pub fn all(&self, f: impl Fn(usize) -> bool) -> bool {
+        match self.source {
+            Some(s) => s[self.first..self.first + self.len]
+                .iter()
+                .all(|&p| f(p as usize)),
+            None => (self.first..self.first + self.len).all(f),
+        }
+    }
+}
 
 /// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
 pub struct NoFinish;
@@ -453,16 +483,15 @@ where
                 || {
                     let first = c * CHUNK;
                     let n = ok.len();
-                    // The particle of each slot of the chunk.
-                    let mut particles = [0usize; CHUNK];
-                    for (k, p) in particles[..n].iter_mut().enumerate() {
-                        *p = source.map_or(first + k, |s| s[first + k] as usize);
-                    }
-                    let particles = &particles[..n];
+                    let chunk = Chunk {
+                        first,
+                        len: n,
+                        source,
+                    };
                     // Not initialised first: each slot is written whole by its gather.
                     let mut slots = [std::mem::MaybeUninit::<ParticleUpdate<D>>::uninit(); CHUNK];
-                    for (u, &p) in slots[..n].iter_mut().zip(particles) {
-                        u.write(gather(p));
+                    for (k, u) in slots[..n].iter_mut().enumerate() {
+                        u.write(gather(chunk.particle(k)));
                     }
                     // SAFETY: the first `n` slots were written just above.
                     let updates = unsafe {
@@ -473,15 +502,15 @@ where
                     };
                     let (mut speed, mut all_admissible) = (0.0f64, true);
                     let mut speeds = [None; CHUNK];
-                    let whole = finish
-                        .is_some_and(|f| f.finish_chunk(particles, updates, &mut speeds[..n]));
+                    let whole =
+                        finish.is_some_and(|f| f.finish_chunk(chunk, updates, &mut speeds[..n]));
                     for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
                         let slot = first + k;
                         // SAFETY: every slot is visited by one task only.
                         let finished = match finish {
                             _ if whole => speeds[k],
                             Some(f) => f.finish(
-                                particles[k],
+                                chunk.particle(k),
                                 u,
                                 unsafe { writer.plastic(slot) }.unwrap_or(scratch),
                             ),

@@ -45,7 +45,7 @@ use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
 use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
 use crate::sim::{Scheme, Sim, Transfer};
 use crate::{Matrix, Vector};
-use grid_to_particle::CHUNK;
+use grid_to_particle::{Chunk, CHUNK};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
@@ -883,14 +883,14 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
     #[inline(always)]
     fn finish_chunk(
         &self,
-        particles: &[usize],
+        chunk: Chunk<'_>,
         us: &mut [ParticleUpdate<D>],
         speeds: &mut [Option<f64>],
     ) -> bool {
         let n = us.len();
         let ps = self.particles;
-        let id = ps.material[particles[0]];
-        if particles.iter().any(|&p| ps.material[p] != id) {
+        let id = ps.material[chunk.particle(0)];
+        if !chunk.all(|p| ps.material[p] == id) {
             return false;
         }
         let crate::material::Material::NeoHookean(m) = &self.materials[id as usize] else {

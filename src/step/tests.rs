@@ -860,8 +860,12 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             assert_eq!(alone[3].position[0], 0.0);
             let mut together = updates[..len].to_vec();
             let mut speeds = vec![Some(-1.0); len];
-            let particles: Vec<usize> = (0..len).collect();
-            assert!(finish.finish_chunk(&particles, &mut together, &mut speeds));
+            let chunk = super::Chunk {
+                first: 0,
+                len,
+                source: None,
+            };
+            assert!(finish.finish_chunk(chunk, &mut together, &mut speeds));
             assert_eq!(speeds, expected, "{D}D, {len} particles");
             for (a, b) in alone.iter().zip(&together) {
                 assert_eq!(a.stress, b.stress);
@@ -875,9 +879,12 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
         inverted[2].deformation_gradient[(1, 1)] = 1.0;
         let mut speeds = vec![None; CHUNK];
         let before = inverted.clone();
-        let (first, second): (Vec<usize>, Vec<usize>) =
-            ((0..CHUNK).collect(), (CHUNK..2 * CHUNK).collect());
-        assert!(!finish.finish_chunk(&first, &mut inverted, &mut speeds));
+        let [first, second] = [0, CHUNK].map(|first| super::Chunk {
+            first,
+            len: CHUNK,
+            source: None,
+        });
+        assert!(!finish.finish_chunk(first, &mut inverted, &mut speeds));
         assert_eq!(inverted, before);
         let mut mixed = ps.clone();
         mixed.material[CHUNK + 1] = soil;
@@ -886,13 +893,13 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             ..finish
         };
         let mut chunk = updates[CHUNK..].to_vec();
-        assert!(!finish_mixed.finish_chunk(&second, &mut chunk, &mut speeds));
+        assert!(!finish_mixed.finish_chunk(second, &mut chunk, &mut speeds));
         mixed.material.fill(soil);
         let finish_soil = super::ConstitutiveUpdate {
             particles: &mixed,
             ..finish
         };
-        assert!(!finish_soil.finish_chunk(&second, &mut chunk, &mut speeds));
+        assert!(!finish_soil.finish_chunk(second, &mut chunk, &mut speeds));
     }
     check::<2>();
     check::<3>();
