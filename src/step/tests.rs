@@ -459,6 +459,22 @@ fn rejected_steps_keep_the_last_good_state() {
     sim.step(dt).unwrap();
 }
 
+/// Spacing of [`block_by_columns`]: two particles per cell of the 32 × 32 unit grid.
+const BY_COLUMNS_SPACING: f64 = 1.0 / 64.0;
+
+/// A 32 × 32 block of particles in the middle of the unit square, listed column by column
+/// (across the rows of grid blocks, so the first step finds them scattered and sorts them).
+fn block_by_columns() -> Vec<Vector<2>> {
+    let q = BY_COLUMNS_SPACING;
+    (0..32)
+        .flat_map(|i| {
+            (0..32).map(move |j| {
+                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
+            })
+        })
+        .collect()
+}
+
 /// A step that sorts the particles as it gathers (`Reorder::InGather`) and is rejected names
 /// the first particle that failed by its id, as the same step without sorting does, and keeps
 /// the last good state. Particles added column by column (so the first step sorts), one of them
@@ -466,14 +482,7 @@ fn rejected_steps_keep_the_last_good_state() {
 /// slot of the sorted new state than its id.
 #[test]
 fn a_rejected_sorting_step_names_the_particle_by_id() {
-    let q = 1.0 / 64.0;
-    let x: Vec<Vector<2>> = (0..32)
-        .flat_map(|i| {
-            (0..32).map(move |j| {
-                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
-            })
-        })
-        .collect();
+    let (x, q) = (block_by_columns(), BY_COLUMNS_SPACING);
     let named = |sort: bool| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
         sim.set_particle_sorting(sort);
@@ -1284,14 +1293,7 @@ fn vc_body_against_the_domain_edge_steps() {
 /// the two halves of the block apart by them, so a slip in the map back would show at once).
 #[test]
 fn sorting_the_particles_changes_only_round_off() {
-    let q = 1.0 / 64.0;
-    let added: Vec<Vector<2>> = (0..32)
-        .flat_map(|i| {
-            (0..32).map(move |j| {
-                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
-            })
-        })
-        .collect();
+    let (added, q) = (block_by_columns(), BY_COLUMNS_SPACING);
     let run = |sort: bool| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
         sim.set_particle_sorting(sort);
@@ -1348,14 +1350,7 @@ fn sorting_the_particles_changes_only_round_off() {
 /// yields, so its history moves with it).
 #[test]
 fn sorting_in_grid_to_particle_is_sorting_at_the_commit() {
-    let q = 1.0 / 64.0;
-    let added: Vec<Vector<2>> = (0..32)
-        .flat_map(|i| {
-            (0..32).map(move |j| {
-                Vector::<2>::new(0.25 + (i as f64 + 0.5) * q, 0.25 + (j as f64 + 0.5) * q)
-            })
-        })
-        .collect();
+    let (added, q) = (block_by_columns(), BY_COLUMNS_SPACING);
     let run = |at_commit: bool| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
         sim.work.reorder_at_commit = at_commit;
