@@ -300,7 +300,8 @@ impl<const D: usize> Bins<D> {
 
     /// Whether the particles' storage is scattered over their blocks: when the runs of
     /// consecutive slots in `order` are shorter than `SORTED_RUN` on average, the step stores
-    /// the particles in `order` ([`crate::particles::Particles::permute`]), after which `order`
+    /// the particles in `order` (`step::Reorder`: in grid to particle under USL, by
+    /// [`crate::particles::Particles::permute`] at the commit otherwise), after which `order`
     /// is one run per block's worth of particles until they move to other blocks.
     pub fn is_scattered(&self) -> bool {
         let (order, next) = (&self.order[..], self.order.get(1..).unwrap_or_default());

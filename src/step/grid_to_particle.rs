@@ -372,7 +372,7 @@ where
         assert_eq!(source.len(), ps.len(), "a permutation of the particles");
     }
     // One compiled pass per case: MLS takes no gradient sum. (One per `source` too made no
-    // difference: the slot's particle is read once per chunk.)
+    // measurable difference; BENCHMARKS.md, session 15.)
     if plan.mls {
         gather_all::<true, D, F>(
             grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,
