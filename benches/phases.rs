@@ -73,7 +73,7 @@ fn p2g<const D: usize, S: StencilView<D>>(
         Some(forces),
         None,
         nodes,
-    )
+    );
 }
 
 fn phases<const D: usize>(c: &mut Criterion, m: usize) {

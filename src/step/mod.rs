@@ -475,7 +475,10 @@ impl<const D: usize> Sim<D> {
                 .filter(|_| plan.mls)
                 .map(|inverse_inertia| (dt, inverse_inertia)),
         };
-        let mass_floor = 1e-10 * ps.mass.iter().copied().fold(0.0, f64::max);
+        // Nodes at or below this mass get no velocity: a fraction of the largest particle mass,
+        // which particle to grid returns.
+        let floor_of = |largest_mass: f64| 1e-10 * largest_mass;
+        let mut mass_floor = 0.0;
         // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
         let mut body_surfaces = BoundaryPoints::default();
         if let Some(contact) = contact {
@@ -507,7 +510,7 @@ impl<const D: usize> Sim<D> {
                     }
                     None => None,
                 };
-                particle_to_grid(
+                mass_floor = floor_of(particle_to_grid(
                     grid,
                     ps,
                     &work.bins,
@@ -518,7 +521,7 @@ impl<const D: usize> Sim<D> {
                     Some(Forces { vc, ..forces }),
                     Some(b as u32),
                     nodes,
-                );
+                ));
                 // 4. Grid update per body, then the contact correction where bodies meet.
                 grid_update(
                     grid,
@@ -552,7 +555,7 @@ impl<const D: usize> Sim<D> {
             }
             crate::contact::correct_velocities(&contact, &mut work.bodies, &rigid, &work.shared);
         } else {
-            particle_to_grid(
+            mass_floor = floor_of(particle_to_grid(
                 grid,
                 ps,
                 &work.bins,
@@ -563,7 +566,7 @@ impl<const D: usize> Sim<D> {
                 Some(forces),
                 None,
                 &mut work.nodes,
-            );
+            ));
             if boundary.has_tractions() {
                 apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
             }

