@@ -62,7 +62,10 @@ pub enum Scheme {
 ///
 /// `accelerations(time, reference, current, out)` writes the body force per unit mass (an
 /// acceleration, added to gravity) of every particle into `out`; an `Err` stops the step.
-pub trait BodyForce<const D: usize> {
+///
+/// [`Sim::step`] calls it on the thread that calls `step`, before the rest of the step runs on
+/// rayon's threads; it is `Send` so that a `Sim` is (and can be stepped from the pool).
+pub trait BodyForce<const D: usize>: Send {
     fn accelerations(
         &mut self,
         time: f64,
@@ -74,7 +77,8 @@ pub trait BodyForce<const D: usize> {
 
 impl<const D: usize, F> BodyForce<D> for F
 where
-    F: FnMut(f64, &[Vector<D>], &[Vector<D>], &mut [Vector<D>]) -> std::result::Result<(), String>,
+    F: FnMut(f64, &[Vector<D>], &[Vector<D>], &mut [Vector<D>]) -> std::result::Result<(), String>
+        + Send,
 {
     fn accelerations(
         &mut self,

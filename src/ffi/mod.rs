@@ -566,6 +566,13 @@ struct CBodyForce {
     buffers: [Vec<f64>; 3],
 }
 
+// SAFETY: rkmpm calls the callback only from the thread that calls `rkmpm_sim_step` (or
+// `rkmpm_sim_advance`), never from its worker threads and never twice at once (`Sim::step`
+// evaluates the body force before the rest of the step goes to the pool); the handle moves
+// between threads only as the caller moves it, which the C API documents as the caller's
+// business. So `user` is used as the caller would use it.
+unsafe impl Send for CBodyForce {}
+
 impl<const D: usize> BodyForce<D> for CBodyForce {
     fn accelerations(
         &mut self,

@@ -1502,3 +1502,42 @@ fn nodes_lighter_than_the_mass_floor_get_no_velocity() {
         );
     }
 }
+
+/// The body force is called on the thread that steps (the C API promises it), also now that the
+/// rest of the step runs on rayon's threads: from the test's own thread and from a thread of a
+/// pool of two that steps the simulation there; the step's result is the same either way.
+#[test]
+fn the_body_force_is_called_on_the_thread_that_steps() {
+    fn step_on_this_thread() -> (Vec<std::thread::ThreadId>, Particles<2>) {
+        let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+        let dt = sim.stable_dt(0.3).unwrap();
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let record = seen.clone();
+        sim.set_body_force(Some(Box::new(
+            move |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], a: &mut [Vector<2>]| {
+                record.lock().unwrap().push(std::thread::current().id());
+                a.iter_mut().for_each(|a| *a = Vector::<2>::new(0.0, -9.81));
+                Ok(())
+            },
+        )));
+        for _ in 0..3 {
+            sim.step(dt).unwrap();
+        }
+        let seen = seen.lock().unwrap().clone();
+        (seen, sim.particles().clone())
+    }
+    let here = std::thread::current().id();
+    let (seen, alone) = step_on_this_thread();
+    assert_eq!(seen, vec![here; 3]);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let (seen, in_pool) = pool.install(|| {
+        let (seen, ps) = step_on_this_thread();
+        assert_eq!(seen, vec![std::thread::current().id(); 3]);
+        (seen, ps)
+    });
+    assert_ne!(seen[0], here);
+    assert_eq!(in_pool, alone);
+}
