@@ -296,6 +296,38 @@ impl<const D: usize> GridNodes<D> {
         }
     }
 
+    /// How many nodes of `nodes` (a range of storage indices) [`GridNodes::collect_touched`]
+    /// would list: marked touched or given mass.
+    #[inline(always)]
+    pub fn count_written(&self, nodes: std::ops::Range<usize>) -> usize {
+        let (touched, mass) = (&self.touched[nodes.clone()], &self.mass[nodes]);
+        touched
+            .iter()
+            .zip(mass)
+            .map(|(&t, &m)| usize::from(t | (m != 0.0)))
+            .sum()
+    }
+
+    /// When nothing is listed yet: room for `count` nodes in `active`, and a [`NodeList`] that
+    /// puts nodes there from several threads. `None`, having changed nothing, when nodes are
+    /// listed already.
+    pub fn list(&mut self, count: usize) -> Option<NodeList<'_>> {
+        if !self.active.is_empty() {
+            return None;
+        }
+        assert!(
+            count <= u32::MAX as usize,
+            "active nodes fit their 32-bit slots"
+        );
+        self.active.resize(count, 0);
+        Some(NodeList {
+            active: SharedSlice::new(&mut self.active),
+            slot: SharedSlice::new(&mut self.slot),
+            touched: SharedSlice::new(&mut self.touched),
+            mass: &self.mass,
+        })
+    }
+
     /// Position of touched node `n` in `active`.
     #[inline]
     pub fn slot(&self, n: usize) -> usize {
@@ -523,6 +555,38 @@ impl<'a, T> SharedSlice<'a, T> {
     pub unsafe fn at(&self, i: usize) -> &mut T {
         assert!(i < self.len);
         &mut *self.ptr.add(i)
+    }
+}
+
+/// Puts nodes into the active list from several threads ([`GridNodes::list`]).
+pub struct NodeList<'a> {
+    active: SharedSlice<'a, usize>,
+    slot: SharedSlice<'a, u32>,
+    touched: SharedSlice<'a, bool>,
+    mass: &'a [f64],
+}
+
+impl NodeList<'_> {
+    /// Whether [`GridNodes::collect_touched`] would list node `n` (marked touched or given
+    /// mass).
+    ///
+    /// # Safety
+    /// No other thread puts node `n` meanwhile.
+    #[inline(always)]
+    pub unsafe fn is_written(&self, n: usize) -> bool {
+        *self.touched.at(n) || self.mass[n] != 0.0
+    }
+
+    /// Lists node `n` at position `k` of `active`, marked touched: what
+    /// [`GridNodes::collect_touched`] does for the `k`-th node it lists.
+    ///
+    /// # Safety
+    /// No other thread puts a node at `k` or puts node `n`.
+    #[inline(always)]
+    pub unsafe fn put(&self, k: usize, n: usize) {
+        *self.active.at(k) = n;
+        *self.slot.at(n) = k as u32;
+        *self.touched.at(n) = true;
     }
 }
 

@@ -337,31 +337,79 @@ impl<const D: usize> Bins<D> {
 
     /// Appends to `nodes.active` every node of the touched node blocks that was marked touched
     /// and is not listed yet, block by block in ascending order (see
-    /// [`GridNodes::collect_touched`]).
+    /// [`GridNodes::collect_touched`]). When nothing is listed yet (the first map of a step),
+    /// the blocks are scanned in parallel, once to count their nodes and once to put them into
+    /// their stretch of the list: the same list.
     pub fn collect_active(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) {
-        let dims = grid.dims();
-        let strides = grid.strides();
-        'blocks: for &key in &self.node_blocks {
-            let c = self.coords(key as usize);
-            let block = self.layout.block;
-            let lo: [usize; D] = std::array::from_fn(|a| c[a] * block[a]);
-            let hi: [usize; D] = std::array::from_fn(|a| ((c[a] + 1) * block[a]).min(dims[a]));
-            let mut i = lo;
+        if nodes.active.is_empty() {
+            let written = &*nodes;
+            let counts: Vec<usize> = self
+                .node_blocks
+                .par_iter()
+                .map(|&key| {
+                    let mut count = 0;
+                    self.for_each_row(grid, key, |row| count += written.count_written(row));
+                    count
+                })
+                .collect();
+            let mut start = Vec::with_capacity(counts.len());
+            let mut total = 0;
+            for c in counts {
+                start.push(total);
+                total += c;
+            }
+            if let Some(list) = nodes.list(total) {
+                self.node_blocks
+                    .par_iter()
+                    .zip(&start)
+                    .for_each(|(&key, &start)| {
+                        let mut k = start;
+                        self.for_each_row(grid, key, |row| {
+                            for n in row {
+                                // SAFETY: each block puts its own nodes into its own stretch,
+                                // whose length the count above took with the same test.
+                                unsafe {
+                                    if list.is_written(n) {
+                                        list.put(k, n);
+                                        k += 1;
+                                    }
+                                }
+                            }
+                        });
+                    });
+                return;
+            }
+        }
+        for &key in &self.node_blocks {
+            self.for_each_row(grid, key, |row| row.for_each(|n| nodes.collect_touched(n)));
+        }
+    }
+
+    /// Calls `f` with the storage indices of each row of node block `key` (its nodes along axis
+    /// 0, contiguous in storage), the rows in storage order.
+    #[inline(always)]
+    fn for_each_row(&self, grid: &Grid<D>, key: u32, mut f: impl FnMut(std::ops::Range<usize>)) {
+        let (dims, strides) = (grid.dims(), grid.strides());
+        debug_assert_eq!(strides[0], 1, "axis 0 is contiguous in node storage");
+        let c = self.coords(key as usize);
+        let block = self.layout.block;
+        let lo: [usize; D] = std::array::from_fn(|a| c[a] * block[a]);
+        let hi: [usize; D] = std::array::from_fn(|a| ((c[a] + 1) * block[a]).min(dims[a]));
+        let mut i = lo;
+        loop {
+            let start: usize = (0..D).map(|a| i[a] * strides[a]).sum();
+            f(start..start + (hi[0] - lo[0]));
+            let mut a = 1;
             loop {
-                let n: usize = (0..D).map(|a| i[a] * strides[a]).sum();
-                nodes.collect_touched(n);
-                let mut a = 0;
-                loop {
-                    i[a] += 1;
-                    if i[a] < hi[a] {
-                        break;
-                    }
-                    i[a] = lo[a];
-                    a += 1;
-                    if a == D {
-                        continue 'blocks;
-                    }
+                if a == D {
+                    return;
                 }
+                i[a] += 1;
+                if i[a] < hi[a] {
+                    break;
+                }
+                i[a] = lo[a];
+                a += 1;
             }
         }
     }

@@ -1541,3 +1541,60 @@ fn the_body_force_is_called_on_the_thread_that_steps() {
     assert_ne!(seen[0], here);
     assert_eq!(in_pool, alone);
 }
+
+/// The active list collected in parallel (nothing listed yet) is the serial one: the written
+/// nodes (marked touched, or with mass) of the touched node blocks, block by block in ascending
+/// order, each with its slot; nodes outside those blocks are not listed. The serial way is
+/// taken when a node is listed already: listing the parallel list's first node first must give
+/// the same list. In 2D and 3D, with blocks cut by the grid's edge.
+#[test]
+fn active_nodes_collected_in_parallel_are_the_serial_list() {
+    fn check<const D: usize>(dims: [usize; D]) {
+        use crate::grid::{Grid, GridNodes, NodeScatter};
+        use crate::shape::ShapeFunction;
+        use crate::step::Bins;
+        let mut rng = crate::shape::UniformRng::new(11);
+        let f: Box<dyn ShapeFunction<D>> = Shape::BSpline2.build().unwrap();
+        let mut grid = Grid::<D>::new(Vector::<D>::zeros(), dims, 0.1).unwrap();
+        grid.set_ghost_layers(f.ghost_layers()).unwrap();
+        // Particles in part of the grid only, so that some node blocks are untouched.
+        let x: Vec<Vector<D>> = (0..3000)
+            .map(|_| Vector::<D>::from_fn(|a, _| 0.06 * dims[a] as f64 * rng.uniform()))
+            .collect();
+        let mut bins = Bins::<D>::default();
+        bins.compute(f.as_ref(), &grid, &x);
+        let mut nodes = GridNodes::<D>::default();
+        nodes.ensure(&grid, false, false, false).unwrap();
+        // Every third node touched, every fifth given mass, everywhere in the grid.
+        {
+            let out = NodeScatter::new(&mut nodes);
+            for n in (0..grid.node_count()).step_by(3) {
+                // SAFETY: one thread.
+                unsafe { out.touch(n) };
+            }
+        }
+        for n in (0..grid.node_count()).step_by(5) {
+            nodes.mass[n] = 1.0;
+        }
+        let mut parallel = nodes.clone();
+        bins.collect_active(&grid, &mut parallel);
+        let listed = &parallel.active;
+        assert!(listed.len() > 100, "{}", listed.len());
+        for (k, &n) in listed.iter().enumerate() {
+            assert!(n % 3 == 0 || n % 5 == 0, "node {n} is not written");
+            assert!(parallel.is_touched(n));
+            assert_eq!(parallel.slot(n), k);
+        }
+        let mut serial = nodes.clone();
+        serial.touch(listed[0]);
+        bins.collect_active(&grid, &mut serial);
+        assert_eq!(&serial.active, listed);
+        // Written nodes outside the touched blocks stay off the list.
+        let unlisted = (0..grid.node_count())
+            .filter(|&n| (n % 3 == 0 || n % 5 == 0) && !listed.contains(&n))
+            .count();
+        assert!(unlisted > 0);
+    }
+    check::<2>([300, 40]);
+    check::<3>([40, 30, 20]);
+}
