@@ -286,7 +286,7 @@ impl<const D: usize> GridNodes<D> {
     /// for listed nodes).
     #[inline]
     pub fn collect_touched(&mut self, n: usize) {
-        if self.touched[n] || self.mass[n] != 0.0 {
+        if is_written(self.touched[n], self.mass[n]) {
             self.touched[n] = true;
             let s = self.slot[n] as usize;
             if s >= self.active.len() || self.active[s] != n {
@@ -304,7 +304,7 @@ impl<const D: usize> GridNodes<D> {
         touched
             .iter()
             .zip(mass)
-            .map(|(&t, &m)| usize::from(t | (m != 0.0)))
+            .map(|(&t, &m)| usize::from(is_written(t, m)))
             .sum()
     }
 
@@ -558,6 +558,14 @@ impl<'a, T> SharedSlice<'a, T> {
     }
 }
 
+/// Whether a node with this touched mark and mass was written this step, and so belongs in the
+/// active list: the one rule of the serial collection ([`GridNodes::collect_touched`]) and the
+/// parallel one ([`GridNodes::count_written`], [`NodeList::is_written`]), which must agree.
+#[inline(always)]
+fn is_written(touched: bool, mass: f64) -> bool {
+    touched | (mass != 0.0)
+}
+
 /// Puts nodes into the active list from several threads ([`GridNodes::list`]).
 pub struct NodeList<'a> {
     active: SharedSlice<'a, usize>,
@@ -574,7 +582,7 @@ impl NodeList<'_> {
     /// No other thread puts node `n` meanwhile.
     #[inline(always)]
     pub unsafe fn is_written(&self, n: usize) -> bool {
-        *self.touched.at(n) || self.mass[n] != 0.0
+        is_written(*self.touched.at(n), self.mass[n])
     }
 
     /// Lists node `n` at position `k` of `active`, marked touched: what
