@@ -6,10 +6,12 @@
 //! (`ShapeFunction::stencil_origin`), so with `B_a ≥ W − 1` (`W` stencil nodes per axis) its
 //! stencil lies in its own block and the next one along each axis. Blocks take one of
 //! `2^D` colours by the parity of their block coordinates; two blocks of one colour are at least
-//! two blocks apart along some axis, so they write disjoint nodes. The map runs colour by colour,
-//! the blocks of a colour in parallel, the particles of a block in storage order: every node's
-//! sum is taken in an order fixed by the particles' positions and storage order (which the
-//! step's sorts set from positions alone), never by the number of threads. When the particles
+//! two blocks apart along some axis, so they write disjoint nodes. The map takes the blocks colour
+//! by colour, the particles of a block in storage order, and a block starts once the blocks of
+//! earlier colours that share nodes with it (its neighbours) have ended ([`Bins::run_tasks`]):
+//! blocks of one colour run in parallel, and every node's sum is taken in an order fixed by the
+//! particles' positions and storage order (which the step's sorts set from positions alone),
+//! never by the number of threads. When the particles
 //! occupy enough rows of blocks (`MIN_ROWS`), the map's tasks are whole rows instead (the blocks
 //! along axis 0, in turn), coloured by the parity of the other block coordinates
 //! ([`Bins::tasks`]): longer runs and half the colours.
@@ -139,6 +141,10 @@ pub struct Bins<const D: usize> {
     /// coordinates (`2^(D−1)` colours, rows of one colour being two blocks apart); otherwise
     /// (a body thin across axis 0) a task is a block, coloured as `colours`.
     pub tasks: Vec<Vec<std::ops::Range<usize>>>,
+    /// For each task of `tasks` taken colour by colour (`k`-th overall), the earlier tasks it
+    /// shares nodes with: `waits[wait_start[k]..wait_start[k + 1]]` ([`Bins::run_tasks`]).
+    waits: Vec<u32>,
+    wait_start: Vec<u32>,
     /// Node blocks touched by some particle's stencil, ascending.
     pub node_blocks: Vec<u32>,
     /// Scratch: particles per block, then start offsets; and node-block marks.
@@ -155,6 +161,8 @@ impl<const D: usize> Default for Bins<D> {
             occupied: Vec::new(),
             colours: Vec::new(),
             tasks: Vec::new(),
+            waits: Vec::new(),
+            wait_start: Vec::new(),
             node_blocks: Vec::new(),
             counts: Vec::new(),
             marks: Vec::new(),
@@ -275,19 +283,28 @@ impl<const D: usize> Bins<D> {
             rows.push((row, start..end));
         }
         self.tasks.iter_mut().for_each(Vec::clear);
-        if rows.len() >= MIN_ROWS {
+        // The block (of a row: its first block) of each task, colour by colour.
+        let mut cells: Vec<Vec<usize>> = Vec::new();
+        let by_rows = rows.len() >= MIN_ROWS;
+        if by_rows {
             self.tasks.resize(1 << (D - 1), Vec::new());
+            cells.resize(1 << (D - 1), Vec::new());
             for (row, range) in rows {
                 let c = self.coords(row * blocks[0]);
                 let colour = (1..D).map(|a| (c[a] & 1) << (a - 1)).sum::<usize>();
                 self.tasks[colour].push(range);
+                cells[colour].push(row * blocks[0]);
             }
         } else {
             self.tasks.resize(1 << D, Vec::new());
-            for (tasks, colour) in self.tasks.iter_mut().zip(&self.colours) {
+            cells.resize(1 << D, Vec::new());
+            for ((tasks, cells), colour) in self.tasks.iter_mut().zip(&mut cells).zip(&self.colours)
+            {
                 tasks.extend(colour.iter().map(|&b| self.occupied[b as usize].1.clone()));
+                cells.extend(colour.iter().map(|&b| self.occupied[b as usize].0 as usize));
             }
         }
+        self.find_waits(&cells.concat(), by_rows);
         self.node_blocks.clear();
         self.node_blocks.extend(
             self.marks
@@ -327,6 +344,101 @@ impl<const D: usize> Bins<D> {
     }
 
     /// Block coordinates of block `key`.
+    /// Fills `waits`: for each task (`cells[k]` its block, tasks colour by colour) the earlier
+    /// tasks whose blocks are within one block of it along every axis (along the axes other than
+    /// 0 for rows), which are the tasks that share nodes with it (a block's stencils reach its
+    /// own nodes and its upper neighbours'). They are of other colours, as tasks of one colour
+    /// are two blocks apart along some axis.
+    fn find_waits(&mut self, cells: &[usize], by_rows: bool) {
+        let blocks = self.layout.blocks;
+        let total: usize = blocks.iter().product();
+        let mut task_of = vec![u32::MAX; total];
+        for (k, &cell) in cells.iter().enumerate() {
+            task_of[cell] = k as u32;
+        }
+        self.waits.clear();
+        self.wait_start.clear();
+        self.wait_start.push(0);
+        let first_axis = usize::from(by_rows);
+        for (k, &cell) in cells.iter().enumerate() {
+            let c = self.coords(cell);
+            // The neighbours: offsets −1, 0, 1 along each axis from `first_axis` on.
+            for offset in 0..3usize.pow((D - first_axis) as u32) {
+                let (mut o, mut key, mut inside) = (offset, 0usize, true);
+                let mut n = [0usize; D];
+                for a in 0..D {
+                    n[a] = c[a];
+                    if a >= first_axis {
+                        let na = c[a] as i64 + (o % 3) as i64 - 1;
+                        o /= 3;
+                        inside &= na >= 0 && (na as usize) < blocks[a];
+                        n[a] = na.max(0) as usize;
+                    }
+                }
+                for a in (0..D).rev() {
+                    key = key * blocks[a] + n[a];
+                }
+                if inside && key < total {
+                    let t = task_of[key];
+                    if t != u32::MAX && (t as usize) < k {
+                        self.waits.push(t);
+                    }
+                }
+            }
+            self.wait_start.push(self.waits.len() as u32);
+        }
+    }
+
+    /// Runs `task` on the ranges of `order` of every task of particle to grid, in parallel, and
+    /// folds the results with `reduce`: each task starts once the earlier tasks it shares nodes
+    /// with ([`Bins::find_waits`]) have ended, so every node's sum is taken in the order of the
+    /// colours, as colour after colour would; but a thread that ends its tasks of one colour goes
+    /// on with those of the next whose neighbours are done, instead of waiting for the whole
+    /// colour to end.
+    pub fn run_tasks<R: Send>(
+        &self,
+        identity: impl Fn() -> R + Sync + Send,
+        task: impl Fn(std::ops::Range<usize>) -> R + Sync + Send,
+        reduce: impl Fn(R, R) -> R + Sync + Send,
+    ) -> R {
+        use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+        let ranges: Vec<&std::ops::Range<usize>> = self.tasks.iter().flatten().collect();
+        let n = ranges.len();
+        let next = AtomicUsize::new(0);
+        let done: Vec<AtomicBool> = (0..n).map(|_| AtomicBool::new(false)).collect();
+        let workers = rayon::current_num_threads().clamp(1, n.max(1));
+        (0..workers)
+            .into_par_iter()
+            .map(|_| {
+                let mut result = identity();
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    if k >= n {
+                        return result;
+                    }
+                    for &t in self.waits_of(k) {
+                        let mut spins = 0u32;
+                        while !done[t as usize].load(Ordering::Acquire) {
+                            spins += 1;
+                            if spins < 1 << 12 {
+                                std::hint::spin_loop();
+                            } else {
+                                std::thread::yield_now();
+                            }
+                        }
+                    }
+                    result = reduce(result, task(ranges[k].clone()));
+                    done[k].store(true, Ordering::Release);
+                }
+            })
+            .reduce(&identity, &reduce)
+    }
+
+    /// The tasks the `k`-th task of particle to grid (colour by colour) waits for.
+    pub fn waits_of(&self, k: usize) -> &[u32] {
+        &self.waits[self.wait_start[k] as usize..self.wait_start[k + 1] as usize]
+    }
+
     fn coords(&self, mut key: usize) -> [usize; D] {
         std::array::from_fn(|a| {
             let c = key % self.layout.blocks[a];

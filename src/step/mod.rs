@@ -196,10 +196,6 @@ impl<const D: usize> Sim<D> {
         }
         let mut clock = std::time::Instant::now();
         self.work.active_nodes = self.work.nodes.active.len();
-        self.work.nodes.reset();
-        for b in self.work.bodies.iter_mut() {
-            b.reset();
-        }
         result?;
         self.commit();
         self.work.times.commit += lap(&mut clock);
@@ -342,7 +338,7 @@ impl<const D: usize> Sim<D> {
             }
         }
         // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
-        //    stored lists.
+        //    stored lists. The nodes the last step wrote are cleared meanwhile.
         let order = match self.options.shape {
             Shape::Linear => Some(BSplineOrder::Linear),
             Shape::BSpline2 => Some(BSplineOrder::Quadratic),
@@ -355,6 +351,7 @@ impl<const D: usize> Sim<D> {
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
             Some(BSplineOrder::Cubic) => self.tensor_phases(dt, |w| &mut w.cubic),
             None => {
+                self.work.clear_grid();
                 let mut clock = std::time::Instant::now();
                 self.work
                     .bins
@@ -382,23 +379,24 @@ impl<const D: usize> Sim<D> {
             _ => BSplineOrder::Cubic,
         };
         let mut stencils = std::mem::take(storage(&mut self.work));
-        let mut clock = std::time::Instant::now();
         // MLS reads no shape-function gradient, except for the mass gradient of contact.
         let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
         // The particles' blocks are found with the factors, from their stencils' first nodes.
         let layout = BlockLayout::new(W, &self.grid);
-        stencils.compute_with(
-            &BSpline::new(order),
-            &self.grid,
-            &self.particles.position,
-            derivatives,
-            &layout,
+        let (grid, position) = (&self.grid, &self.particles.position);
+        let work = &mut self.work;
+        let (bins, times) = (&mut work.bins, &mut work.times);
+        let (nodes, bodies) = (&mut work.nodes, &mut work.bodies);
+        let mut clock = std::time::Instant::now();
+        stencils.compute_with(&BSpline::new(order), grid, position, derivatives, &layout);
+        times.shape += lap(&mut clock);
+        // The nodes the last step wrote are cleared meanwhile: below 2^17 particles the bins
+        // sort on one thread, and the other clears.
+        rayon::join(
+            || bins.compute_from_keys(&layout, stencils.block_keys()),
+            || clear_grid(nodes, bodies),
         );
-        self.work.times.shape += lap(&mut clock);
-        self.work
-            .bins
-            .compute_from_keys(&layout, stencils.block_keys());
-        self.work.times.bins += lap(&mut clock);
+        times.bins += lap(&mut clock);
         let result = self.phases(dt, &stencils.local(), None);
         *storage(&mut self.work) = stencils;
         result
@@ -968,6 +966,22 @@ impl<const D: usize> ConstitutiveUpdate<'_, D> {
         }
         u.is_admissible(&self.domain, j)
             .then(|| wave_speed() + u.velocity.norm())
+    }
+}
+
+/// Clears the nodes the last step wrote (all fields zero, none active), of the one field and of
+/// each body's.
+fn clear_grid<const D: usize>(nodes: &mut GridNodes<D>, bodies: &mut [GridNodes<D>]) {
+    nodes.reset();
+    for b in bodies.iter_mut() {
+        b.reset();
+    }
+}
+
+impl<const D: usize> Workspace<D> {
+    /// [`clear_grid`] of the workspace's nodes.
+    pub fn clear_grid(&mut self) {
+        clear_grid(&mut self.nodes, &mut self.bodies);
     }
 }
 

@@ -12,7 +12,6 @@ use crate::integration::VcCorrection;
 use crate::particles::Particles;
 use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils};
 use crate::{Matrix, Vector};
-use rayon::prelude::*;
 
 /// What the first map accumulates besides momentum: mass and forces.
 #[derive(Clone, Copy)]
@@ -35,7 +34,8 @@ pub struct Forces<'a, const D: usize> {
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
 /// * `body`: with contact, only the particles of this material map (to its own field).
 ///
-/// Runs in parallel by colours of rows of grid blocks, or of blocks ([`Bins::tasks`]): every
+/// Runs in parallel by colours of rows of grid blocks, or of blocks ([`Bins::tasks`]), a task
+/// starting once its neighbours of earlier colours have ended ([`Bins::run_tasks`]): every
 /// node's sum is taken in the same order with any number of threads.
 ///
 /// Returns the largest mass of the particles (of all of them, whichever `body` maps), which the
@@ -124,8 +124,7 @@ where
                 if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
                     return;
                 }
-                // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and the scatter runs
-                // one colour at a time.
+                // SAFETY: tasks that share nodes never run at once (`Bins::run_tasks`).
                 unsafe {
                     out.touch(n);
                     let mut momentum = mv;
@@ -183,30 +182,26 @@ where
             stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
         },
     );
-    let mut largest_mass = 0.0f64;
-    for colour in &bins.tasks {
-        let largest_here = colour
-            .par_iter()
-            .map(|range| {
-                let range = range.clone();
-                crate::cpu::wide(
-                    #[inline(always)]
-                    || {
-                        // A copy in this task (see above), not a reference to the shared one.
-                        #[allow(clippy::redundant_locals)]
-                        let scatter = scatter;
-                        let mut largest = 0.0f64;
-                        for &p in &bins.order[range] {
-                            scatter(p as usize);
-                            largest = largest.max(mass[p as usize]);
-                        }
-                        largest
-                    },
-                )
-            })
-            .reduce(|| 0.0, f64::max);
-        largest_mass = largest_mass.max(largest_here);
-    }
+    let largest_mass = bins.run_tasks(
+        || 0.0f64,
+        |range| {
+            crate::cpu::wide(
+                #[inline(always)]
+                || {
+                    // A copy in this task (see above), not a reference to the shared one.
+                    #[allow(clippy::redundant_locals)]
+                    let scatter = scatter;
+                    let mut largest = 0.0f64;
+                    for &p in &bins.order[range] {
+                        scatter(p as usize);
+                        largest = largest.max(mass[p as usize]);
+                    }
+                    largest
+                },
+            )
+        },
+        f64::max,
+    );
     bins.collect_active(grid, nodes);
     largest_mass
 }
