@@ -546,6 +546,12 @@ impl<'a, T> SharedSlice<'a, T> {
         std::slice::from_raw_parts_mut(self.ptr.add(start), len)
     }
 
+    /// The address of element `i` (not dereferenced).
+    #[inline(always)]
+    pub fn as_ptr_at(&self, i: usize) -> *const T {
+        self.ptr.wrapping_add(i)
+    }
+
     /// Element `i`.
     ///
     /// # Safety
