@@ -343,7 +343,6 @@ impl<const D: usize> Bins<D> {
             + self.colours.iter().map(|c| c.capacity() * 4).sum::<usize>()
     }
 
-    /// Block coordinates of block `key`.
     /// Fills `waits`: for each task (`cells[k]` its block, tasks colour by colour) the earlier
     /// tasks whose blocks are within one block of it along every axis (along the axes other than
     /// 0 for rows), which are the tasks that share nodes with it (a block's stencils reach its
@@ -378,7 +377,7 @@ impl<const D: usize> Bins<D> {
                 for a in (0..D).rev() {
                     key = key * blocks[a] + n[a];
                 }
-                if inside && key < total {
+                if inside {
                     let t = task_of[key];
                     if t != u32::MAX && (t as usize) < k {
                         self.waits.push(t);
@@ -391,10 +390,14 @@ impl<const D: usize> Bins<D> {
 
     /// Runs `task` on the ranges of `order` of every task of particle to grid, in parallel, and
     /// folds the results with `reduce`: each task starts once the earlier tasks it shares nodes
-    /// with ([`Bins::find_waits`]) have ended, so every node's sum is taken in the order of the
+    /// with ([`Bins::waits_of`]) have ended, so every node's sum is taken in the order of the
     /// colours, as colour after colour would; but a thread that ends its tasks of one colour goes
     /// on with those of the next whose neighbours are done, instead of waiting for the whole
     /// colour to end.
+    ///
+    /// The threads take the tasks in turn from a shared counter and run each to its end without
+    /// calling into rayon, so a task waits only for tasks taken before it that are running on
+    /// other threads: the waits end. With one thread every wait is over before it starts.
     pub fn run_tasks<R: Send>(
         &self,
         identity: impl Fn() -> R + Sync + Send,
@@ -439,6 +442,7 @@ impl<const D: usize> Bins<D> {
         &self.waits[self.wait_start[k] as usize..self.wait_start[k + 1] as usize]
     }
 
+    /// Block coordinates of block `key`.
     fn coords(&self, mut key: usize) -> [usize; D] {
         std::array::from_fn(|a| {
             let c = key % self.layout.blocks[a];

@@ -979,7 +979,8 @@ fn clear_grid<const D: usize>(nodes: &mut GridNodes<D>, bodies: &mut [GridNodes<
 }
 
 impl<const D: usize> Workspace<D> {
-    /// [`clear_grid`] of the workspace's nodes.
+    /// Clears the nodes the last step wrote (all fields zero, none active), of the one field
+    /// and of each body's; the step does it itself, while it bins.
     pub fn clear_grid(&mut self) {
         clear_grid(&mut self.nodes, &mut self.bodies);
     }
