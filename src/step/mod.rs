@@ -351,8 +351,8 @@ impl<const D: usize> Sim<D> {
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
             Some(BSplineOrder::Cubic) => self.tensor_phases(dt, |w| &mut w.cubic),
             None => {
-                self.work.clear_grid();
                 let mut clock = std::time::Instant::now();
+                self.work.clear_grid();
                 self.work
                     .bins
                     .compute(self.shape.as_ref(), &self.grid, &self.particles.position);

@@ -5,7 +5,7 @@ use std::time::Instant;
 /// Seconds spent in each phase of the steps taken so far (summed over steps).
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub struct PhaseTimes {
-    /// Binning particles by grid block.
+    /// Binning particles by grid block, and clearing the nodes the last step wrote (beside it).
     pub bins: f64,
     /// Shape-function values and gradients (and RK moment solves).
     pub shape: f64,
@@ -20,7 +20,7 @@ pub struct PhaseTimes {
     pub constitutive: f64,
     /// Checks of the new state.
     pub checks: f64,
-    /// Committing the new state and resetting the grid.
+    /// Committing the new state.
     pub commit: f64,
 }
 
