@@ -95,3 +95,29 @@ fn plane_strain_penetration_perforates_fast_and_stops_slow() {
         assert_eq!(ps.mass.iter().sum::<f64>(), mass0);
     }
 }
+
+/// The crack-band regularized damage (`Penetration::failure_band`) on the same coarse plate:
+/// with the strains to failure scaled by 0.375 mm / 2 mm the plate fails in a band at the
+/// projectile's edge and a plug shears out, instead of the strip tearing off its clamp.
+/// Measured at 300 m/s: perforated at 172 µs, residual 222 m/s, plate cut off 1.83 times the
+/// mass under the projectile (the plug and its band, a cell wide on each side), 128 failed
+/// particles. Asserted: perforated, the plate cut off from the clamp is a plug (between 0.8 and
+/// 2.5 times the mass under the projectile; the whole strip would be 3), the residual speed
+/// lies between zero and the impact speed, and damage stays in [0, 1].
+#[test]
+fn regularized_damage_shears_out_a_plug_on_coarse_cells() {
+    use rkmpm::scenes::Penetration;
+    let scene = Penetration {
+        impact_speed: 300.0,
+        cells_through_plate: 6,
+        failure_band: Some(0.375e-3),
+        ..Default::default()
+    };
+    let (r, sim) = scene.run_observed::<2>(0, |_| Ok(())).unwrap();
+    eprintln!("{r:?}");
+    assert!(r.perforated, "{r:?}");
+    assert!((0.8..2.5).contains(&r.separated_mass), "{r:?}");
+    assert!(r.residual_speed > 0.0 && r.residual_speed < 300.0, "{r:?}");
+    let ps = sim.particles();
+    assert!(ps.plastic.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
+}

@@ -15,6 +15,9 @@
 //!   Damage does not soften the material before failure (uncoupled). **At failure (`D = 1`)** the
 //!   point carries no deviatoric stress and no tension: its stress becomes `−max(p, 0) I`, and it
 //!   stays failed. A melted point (`T ≥ T_melt`) likewise has no strength.
+//! * Mesh regularization (optional, by the caller): the failure band cannot be narrower than
+//!   about a cell, so on coarse cells the strains to failure can be scaled down
+//!   ([`JohnsonCookParameters::regularized`], a crack band).
 
 use super::plastic::PlasticState;
 use super::ElasticConstants;
@@ -70,6 +73,29 @@ pub struct JohnsonCookParameters {
     pub damage: Option<[f64; 5]>,
     /// Mie–Grüneisen EOS; `None` uses Hencky's `p = −K ln J`.
     pub eos: Option<MieGruneisen>,
+}
+
+impl JohnsonCookParameters {
+    /// Crack-band regularization of the damage for cells of `cell_size`: the strain to failure
+    /// `(D1 + D2 exp(D3 σ*))(1 + D4 ln ε̇*)(1 + D5 T*)` is scaled by `band_width / cell_size`
+    /// when the cells are coarser than `band_width`, the width of the failure band the
+    /// constants describe (unchanged on finer cells). A shear band cannot be narrower than
+    /// about a cell, so on coarse cells it is that many times wider than the real one; failing
+    /// it at a proportionally smaller strain keeps the work spent per unit area of the crack
+    /// (width × strain to failure) about independent of the cells, as Bažant's crack band does
+    /// for softening and finite-element codes' element-size regularization of failure strains
+    /// does for ductile failure. Scales `D1` and `D2`; without damage it changes nothing. A C
+    /// or Fortran caller does the same by scaling `d1` and `d2`.
+    pub fn regularized(mut self, band_width: f64, cell_size: f64) -> Result<Self> {
+        check_positive("band_width", band_width)?;
+        check_positive("cell_size", cell_size)?;
+        if let Some(d) = &mut self.damage {
+            let scale = (band_width / cell_size).min(1.0);
+            d[0] *= scale;
+            d[1] *= scale;
+        }
+        Ok(self)
+    }
 }
 
 /// OFHC copper: Johnson–Cook strength (Johnson & Cook 1983) and damage (Johnson & Cook 1985)
@@ -426,6 +452,47 @@ mod tests {
         assert_eq!(s, Matrix3::zeros());
         let (_, s) = cu.update(&state, &stretch(0.01), 0.98, 1e-6);
         assert!((s - Matrix3::identity() * s[(0, 0)]).norm() == 0.0 && s[(0, 0)] < 0.0);
+    }
+
+    /// Crack-band regularization: on cells twice the band the point fails at half the strain
+    /// (the same stretch history, so the same triaxiality and rate), on finer cells at the
+    /// same strain; without damage nothing changes; bad widths are refused.
+    #[test]
+    fn regularization_scales_the_strain_to_failure() {
+        let strain_at_failure = |p: JohnsonCookParameters| {
+            let mut m = JohnsonCook::new(JohnsonCookParameters {
+                taylor_quinney: 0.0,
+                ..p
+            })
+            .unwrap();
+            m.p.eos = None;
+            let mut state = PlasticState::default();
+            while state.damage < 1.0 {
+                state = m.update(&state, &stretch(0.005), 1.0, 1e-6).0;
+            }
+            state.plastic_strain
+        };
+        let p = ofhc_copper();
+        let full = strain_at_failure(p);
+        let coarse = strain_at_failure(p.regularized(1e-3, 2e-3).unwrap());
+        // One step's plastic strain (0.005) of slack on each side of the halved strain.
+        assert!((coarse - full / 2.0).abs() < 0.006, "{coarse} vs {full}/2");
+        assert_eq!(p.regularized(1e-3, 0.5e-3).unwrap(), p);
+        let [d1, d2, d3, d4, d5] = p.damage.unwrap();
+        assert_eq!(
+            p.regularized(1e-3, 4e-3).unwrap().damage,
+            Some([d1 / 4.0, d2 / 4.0, d3, d4, d5])
+        );
+        let undamaged = JohnsonCookParameters { damage: None, ..p };
+        assert_eq!(undamaged.regularized(1e-3, 4e-3).unwrap(), undamaged);
+        for (band, h) in [
+            (0.0, 1e-3),
+            (1e-3, -1.0),
+            (f64::NAN, 1e-3),
+            (1e-3, f64::INFINITY),
+        ] {
+            assert!(p.regularized(band, h).is_err(), "{band} {h}");
+        }
     }
 
     /// Mie–Grüneisen: `p → ρ0 c0² μ` for small `μ`, and the Hugoniot stiffening in compression.

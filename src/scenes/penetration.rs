@@ -43,6 +43,11 @@ pub struct Penetration {
     /// Free space below the plate, in plate thicknesses (room for the plate to dish and the
     /// plug to fly).
     pub space_below: f64,
+    /// Crack-band regularization of the plate's damage
+    /// ([`JohnsonCookParameters::regularized`]): the width of the failure band the damage
+    /// constants describe (m); on coarser cells the strains to failure are scaled by
+    /// `failure_band / h`. `None` (the default) uses the constants as they are.
+    pub failure_band: Option<f64>,
 }
 
 impl Default for Penetration {
@@ -59,6 +64,7 @@ impl Default for Penetration {
             shape: Shape::BSpline2,
             integration: Integration::MaterialPoint,
             space_below: 4.0,
+            failure_band: None,
         }
     }
 }
@@ -138,7 +144,11 @@ impl Penetration {
             sim.set_boundary(axis, Side::Low, Boundary::Slip)?;
             sim.set_boundary(axis, Side::High, Boundary::Fixed)?;
         }
-        let plate = sim.add_material(Material::johnson_cook(weldox_460e())?);
+        let weldox = match self.failure_band {
+            Some(band) => weldox_460e().regularized(band, h)?,
+            None => weldox_460e(),
+        };
+        let plate = sim.add_material(Material::johnson_cook(weldox)?);
         let projectile = sim.add_material(Material::neo_hookean(7850.0, 204e9, 0.33)?);
         let q = h / 2.0;
         let lattice = |lo: f64, hi: f64, inside: &dyn Fn(&Vector<D>) -> bool| {
