@@ -243,14 +243,25 @@ fn regularized(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
         };
         let (r, _) = scene.run_observed::<2>(0, |_| Ok(()))?;
         eprintln!("regularized plane strain, {cells} cells: {r:?}");
-        let scale = (FAILURE_BAND * cells as f64 / scene.plate_thickness).min(1.0);
-        writeln!(md, "| {cells} | {scale:.3} | {}", outcome_cells(&r))?;
+        writeln!(
+            md,
+            "| {cells} | {:.3} | {}",
+            strain_scale(&scene),
+            outcome_cells(&r)
+        )?;
     }
+    let quarter_scene = |v| Penetration {
+        impact_speed: v,
+        cells_through_plate: 6,
+        plate_half_width: 40e-3,
+        failure_band: Some(FAILURE_BAND),
+        ..Default::default()
+    };
     writeln!(md, "\nAt 32 cells the scale is 1: the unregularized run of [refinement.md](refinement.md) (plug, 183.7 m/s at 150 µs).\n")?;
     writeln!(
         md,
         "## 3D quarter model, 6 cells through the plate (scale {:.4}), to 300 µs\n",
-        FAILURE_BAND * 6.0 / 12e-3
+        strain_scale(&quarter_scene(300.0))
     )?;
     let reference = Penetration::default();
     let projectile_mass = 7850.0
@@ -267,14 +278,7 @@ fn regularized(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
     let mut last = None;
     for v in [150.0, 200.0, 250.0, 300.0, 400.0] {
-        let scene = Penetration {
-            impact_speed: v,
-            cells_through_plate: 6,
-            plate_half_width: 40e-3,
-            failure_band: Some(FAILURE_BAND),
-            ..Default::default()
-        };
-        let (r, sim) = scene.run_observed::<3>(0, |_| Ok(()))?;
+        let (r, sim) = quarter_scene(v).run_observed::<3>(0, |_| Ok(()))?;
         eprintln!("regularized 3D, {v} m/s: {r:?}");
         let recht_ipson = a * (v * v - BALLISTIC_LIMIT * BALLISTIC_LIMIT).max(0.0).sqrt();
         writeln!(md, "| {v:.0} | {recht_ipson:.0} | {}", outcome_cells(&r))?;
@@ -295,6 +299,13 @@ fn regularized(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
+/// The factor on the plate's strains to failure in `scene` (`JohnsonCookParameters::regularized`
+/// for its cell size).
+fn strain_scale(scene: &Penetration) -> f64 {
+    let band = scene.failure_band.unwrap_or(f64::INFINITY);
+    (band * scene.cells_through_plate as f64 / scene.plate_thickness).min(1.0)
+}
+
 /// Børvik et al. (2002): the measured ballistic limit of the blunt projectile (m/s).
 const BALLISTIC_LIMIT: f64 = 184.5;
 
@@ -306,7 +317,7 @@ fn quarter(out: &Path, cells: &[usize]) -> Result<(), Box<dyn std::error::Error>
     writeln!(md, "Regenerate: `cargo run --release --example penetration -- --quarter {}`. The 3D quarter model of [README.md](README.md) (plate clamped 40 mm from the axis, quadratic B-spline, APIC) at 300 m/s with more cells through the 12 mm plate.\n", cells.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(","))?;
     writeln!(md, "| cells through the plate | end time (µs) | perforated | plate cut off from the clamp / plate under the projectile (mass) | nose below back face (mm) | residual speed (m/s) | failed plate particles | particles | steps | run time (s) |")?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|---|")?;
-    let (mut rows, mut histories) = (Vec::new(), Vec::new());
+    let mut histories = Vec::new();
     for &n in cells {
         let scene = Penetration {
             impact_speed: 300.0,
@@ -327,15 +338,8 @@ fn quarter(out: &Path, cells: &[usize]) -> Result<(), Box<dyn std::error::Error>
             &format!("3D quarter, {n} cells, 300 m/s"),
             &out.join(format!("quarter_300_{n}.png")),
         )?;
-        rows.push(format!(
-            "| {n} | {:.0} | {}",
-            r.time * 1e6,
-            outcome_cells(&r)
-        ));
+        writeln!(md, "| {n} | {:.0} | {}", r.time * 1e6, outcome_cells(&r))?;
         histories.push((n, history));
-    }
-    for row in rows {
-        writeln!(md, "{row}")?;
     }
     writeln!(md, "\n{PERFORATED}\n")?;
     writeln!(md, "Over time: the mean downward speed of the projectile and of the plate under it (within its radius, reference configuration) and the failed plate particles.\n")?;
