@@ -11,6 +11,8 @@
 //!   set used with the later rod experiments (ρ 2040, E 5.84 MPa, φ 21.9°).
 //! * `--floor MU`: floor friction coefficient (default tan φ).
 //! * `--young E`: Young's modulus (Pa; default that of the rods' set).
+//! * `--friction DEG`, `--dilatancy DEG`: friction and dilatancy angles (default those of the
+//!   rods' set, dilatancy 0); the floor's μ stays tan of the rods' friction unless `--floor`.
 //! * `--method bspline2|bspline2-mls|bspline2-vc|rk1|rk1-vc`: quadratic B-spline (default) or RK1
 //!   (ã = 2), with material-point integration or VC of order 1 (the surface found from the
 //!   particles at every step); `bspline2-mls` is the quadratic B-spline with the MLS transfer.
@@ -62,6 +64,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     base.young = value("--young").map_or(Ok(base.young), |v| v.parse())?;
     let mu = base.friction_degrees.to_radians().tan();
     base.floor_friction = value("--floor").map_or(Ok(mu), |v| v.parse())?;
+    base.friction_degrees = value("--friction").map_or(Ok(base.friction_degrees), |v| v.parse())?;
+    base.dilatancy_degrees = value("--dilatancy").map_or(Ok(0.0), |v| v.parse())?;
     let wall = value("--wall").unwrap_or_else(|| "slip".into());
     base.wall = match wall.as_str() {
         "slip" => Boundary::Slip,
@@ -102,8 +106,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         base.rheology = Some(InertialRheology::new(v[1], v[2], v[0])?);
     }
     println!(
-        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, floor μ {:.3}, method {method}, transfer {:?}, rheology {:?}\n",
-        base.young, base.floor_friction, base.transfer, base.rheology
+        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, φ {}°, ψ {}°, floor μ {:.3}, method {method}, transfer {:?}, rheology {:?}\n",
+        base.young, base.friction_degrees, base.dilatancy_degrees, base.floor_friction, base.transfer, base.rheology
     );
     let thick: Vec<f64> = value("--thick").map_or(Ok(Vec::new()), |v| {
         v.split(',').map(str::parse).collect::<Result<_, _>>()

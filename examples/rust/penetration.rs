@@ -17,12 +17,17 @@
 //! minutes on two cores). `-- --regularized` runs the crack-band regularized damage
 //! (`Penetration::failure_band`) in plane strain and over a sweep of speeds in 3D at 6 cells,
 //! against the Recht–Ipson curve through the test's ballistic limit, and writes
-//! `docs/validation/penetration/regularized.md` (about 10 minutes).
+//! `docs/validation/penetration/regularized.md` (about 10 minutes). `-- --limit CELLS --clamp MM
+//! --speeds v1,v2,..` runs the regularized 3D quarter model with `CELLS` cells through the plate
+//! and the plate clamped `MM` mm from the axis at those speeds, fits Recht–Ipson to the
+//! perforating runs (the model's ballistic limit) and writes
+//! `docs/validation/penetration/limit_{CELLS}cells_{MM}mm.md` (6 cells, 80 mm, three speeds:
+//! about 12 minutes; 12 cells, 40 mm: about 20 minutes per speed).
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::scenes::{Penetration, PenetrationResult};
+use rkmpm::scenes::{recht_ipson_fit, Penetration, PenetrationResult};
 use rkmpm::{Field, Integration, Shape, Sim};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -52,6 +57,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return regularized(&out);
     }
     let args: Vec<String> = std::env::args().collect();
+    let value = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    if let Some(cells) = value("--limit") {
+        let clamp: f64 = value("--clamp").map_or(Ok(40.0), |v| v.parse())?;
+        let speeds = value("--speeds")
+            .unwrap_or_else(|| "200,250,300".into())
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<Vec<f64>, _>>()?;
+        return limit(&out, cells.parse()?, clamp, &speeds);
+    }
     if let Some(i) = args.iter().position(|a| a == "--quarter") {
         let cells = args
             .get(i + 1)
@@ -296,6 +315,55 @@ fn regularized(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     writeln!(md, "\n{PERFORATED}\n")?;
     writeln!(md, "![3D, regularized, 300 m/s](regularized_300.png)")?;
     std::fs::write(out.join("regularized.md"), md)?;
+    Ok(())
+}
+
+/// The regularized 3D quarter model with `cells` cells through the plate, clamped `clamp_mm` from
+/// the axis, at each of `speeds`, and the Recht–Ipson curve fitted to the perforating runs.
+fn limit(
+    out: &Path,
+    cells: usize,
+    clamp_mm: f64,
+    speeds: &[f64],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let scene = |v| Penetration {
+        impact_speed: v,
+        cells_through_plate: cells,
+        plate_half_width: clamp_mm * 1e-3,
+        failure_band: Some(FAILURE_BAND),
+        ..Default::default()
+    };
+    let list = |xs: &[f64]| {
+        xs.iter()
+            .map(|x| format!("{x}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let mut md = format!("# Projectile penetration: the regularized 3D model's ballistic limit ({cells} cells, clamped at {clamp_mm} mm)\n\n");
+    writeln!(md, "Regenerate: `cargo run --release --example penetration -- --limit {cells} --clamp {clamp_mm} --speeds {}`. The 3D quarter model of [regularized.md](regularized.md) (damage regularized with the failure band w = {:.3} mm; strain-to-failure scale {:.4}) with {cells} cells through the 12 mm plate and the plate clamped {clamp_mm} mm from the axis, to 300 µs.\n", list(speeds), FAILURE_BAND * 1e3, strain_scale(&scene(300.0)))?;
+    writeln!(md, "| impact speed (m/s) | perforated | plate cut off from the clamp / plate under the projectile (mass) | nose below back face (mm) | residual speed (m/s) | failed plate particles | particles | steps | run time (s) |")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
+    let mut perforating = Vec::new();
+    for &v in speeds {
+        let (r, _) = scene(v).run_observed::<3>(0, |_| Ok(()))?;
+        eprintln!("limit {cells} cells, {clamp_mm} mm, {v} m/s: {r:?}");
+        writeln!(md, "| {v:.0} | {}", outcome_cells(&r))?;
+        std::fs::write(out.join(format!("limit_{cells}cells_{clamp_mm}mm.md")), &md)?;
+        if r.perforated {
+            perforating.push((v, r.residual_speed));
+        }
+    }
+    let r = Penetration::default().projectile_radius * 1e3;
+    writeln!(
+        md,
+        "\n{PERFORATED} Here the plate's quarter over the projectile's is {:.0}.\n",
+        clamp_mm * clamp_mm / (std::f64::consts::FRAC_PI_4 * r * r)
+    )?;
+    match recht_ipson_fit(&perforating) {
+        Some((a, v_bl)) => writeln!(md, "Recht–Ipson `v_r = a (v_i² − v_bl²)^½` fitted (least squares in `v_r²` against `v_i²`) to the {} perforating runs: a = {a:.3}, **ballistic limit v_bl = {v_bl:.0} m/s** ({:+.0}% against the test's {BALLISTIC_LIMIT} m/s).", perforating.len(), (v_bl / BALLISTIC_LIMIT - 1.0) * 100.0)?,
+        None => writeln!(md, "Fewer than two runs perforated: no Recht–Ipson fit.")?,
+    }
+    std::fs::write(out.join(format!("limit_{cells}cells_{clamp_mm}mm.md")), md)?;
     Ok(())
 }
 

@@ -235,4 +235,6 @@ mod taylor;
 pub use taylor::{TaylorBar, TaylorCase, TaylorResult};
 
 mod penetration;
-pub use penetration::{joined_to_the_clamp, weldox_460e, Penetration, PenetrationResult};
+pub use penetration::{
+    joined_to_the_clamp, recht_ipson_fit, weldox_460e, Penetration, PenetrationResult,
+};

@@ -265,6 +265,26 @@ impl Penetration {
     }
 }
 
+/// The Recht–Ipson (1963) residual-speed curve `v_r² = a² (v_i² − v_bl²)` fitted by least squares in `v_r²` against `v_i²` to
+/// `(v_i, v_r)` pairs of perforating impacts: `(a, v_bl)`, the mass factor and the ballistic
+/// limit, or `None` with fewer than two pairs or no positive slope.
+pub fn recht_ipson_fit(runs: &[(f64, f64)]) -> Option<(f64, f64)> {
+    if runs.len() < 2 {
+        return None;
+    }
+    let n = runs.len() as f64;
+    let (x, y): (Vec<f64>, Vec<f64>) = runs.iter().map(|(vi, vr)| (vi * vi, vr * vr)).unzip();
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(&y).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = x.iter().map(|x| (x - mx).powi(2)).sum();
+    let slope = sxy / sxx;
+    if slope.is_nan() || slope <= 0.0 {
+        return None;
+    }
+    let v_bl2 = mx - my / slope;
+    Some((slope.sqrt(), v_bl2.max(0.0).sqrt()))
+}
+
 /// Which particles of material `plate` are joined to its clamped edge (reference distance from
 /// the shot line at least `clamp`) through intact material: two intact (`D < 1`) plate particles
 /// are joined when their current distance is below 1.5 times `spacing` (the lattice spacing)
@@ -328,6 +348,30 @@ pub fn joined_to_the_clamp<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Residual speeds on a Recht–Ipson curve give back its `a` and ballistic limit to round-off;
+    /// fewer than two runs, or residuals that fall with the impact speed, give no fit.
+    #[test]
+    fn recht_ipson_fit_recovers_the_curve() {
+        let (a, v_bl) = (0.87, 184.5);
+        let runs: Vec<(f64, f64)> = [200.0, 250.0, 300.0, 400.0]
+            .iter()
+            .map(|&v: &f64| (v, a * (v * v - v_bl * v_bl).sqrt()))
+            .collect();
+        let (fa, fv) = recht_ipson_fit(&runs).unwrap();
+        assert!(
+            (fa - a).abs() < 1e-12 && (fv - v_bl).abs() < 1e-9,
+            "{fa} {fv}"
+        );
+        // Session 18's 3D runs: 300 → 159.6, 400 → 266.3 m/s gave a = 0.80, v_bl ≈ 225 m/s.
+        let (fa, fv) = recht_ipson_fit(&[(300.0, 159.6), (400.0, 266.3)]).unwrap();
+        assert!(
+            (fa - 0.806).abs() < 1e-3 && (fv - 225.3).abs() < 0.1,
+            "{fa} {fv}"
+        );
+        assert!(recht_ipson_fit(&runs[..1]).is_none());
+        assert!(recht_ipson_fit(&[(300.0, 200.0), (400.0, 100.0)]).is_none());
+    }
 
     /// The plate's back face lies `space_below` plate thicknesses above the grid's bottom (the
     /// lowest plate particles half a particle spacing above it), and a space that is not
