@@ -21,8 +21,8 @@
 //! --speeds v1,v2,..` runs the regularized 3D quarter model with `CELLS` cells through the plate
 //! and the plate clamped `MM` mm from the axis at those speeds, fits Recht–Ipson to the
 //! perforating runs (the model's ballistic limit) and writes
-//! `docs/validation/penetration/limit_{CELLS}cells_{MM}mm.md` (6 cells, 80 mm, three speeds:
-//! about 12 minutes; 12 cells, 40 mm: about 20 minutes per speed).
+//! `docs/validation/penetration/limit_{CELLS}cells_{MM}mm.md` (per speed: 6 cells, 40 mm, about
+//! a minute; 80 mm, 3–4 minutes; 12 cells, 40 mm, about 25 minutes).
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -339,6 +339,7 @@ fn limit(
             .collect::<Vec<_>>()
             .join(",")
     };
+    let path = out.join(format!("limit_{cells}cells_{clamp_mm}mm.md"));
     let mut md = format!("# Projectile penetration: the regularized 3D model's ballistic limit ({cells} cells, clamped at {clamp_mm} mm)\n\n");
     writeln!(md, "Regenerate: `cargo run --release --example penetration -- --limit {cells} --clamp {clamp_mm} --speeds {}`. The 3D quarter model of [regularized.md](regularized.md) (damage regularized with the failure band w = {:.3} mm; strain-to-failure scale {:.4}) with {cells} cells through the 12 mm plate and the plate clamped {clamp_mm} mm from the axis, to 300 µs.\n", list(speeds), FAILURE_BAND * 1e3, strain_scale(&scene(300.0)))?;
     writeln!(md, "| impact speed (m/s) | perforated | plate cut off from the clamp / plate under the projectile (mass) | nose below back face (mm) | residual speed (m/s) | failed plate particles | particles | steps | run time (s) |")?;
@@ -348,7 +349,7 @@ fn limit(
         let (r, _) = scene(v).run_observed::<3>(0, |_| Ok(()))?;
         eprintln!("limit {cells} cells, {clamp_mm} mm, {v} m/s: {r:?}");
         writeln!(md, "| {v:.0} | {}", outcome_cells(&r))?;
-        std::fs::write(out.join(format!("limit_{cells}cells_{clamp_mm}mm.md")), &md)?;
+        std::fs::write(&path, &md)?;
         if r.perforated {
             perforating.push((v, r.residual_speed));
         }
@@ -363,7 +364,7 @@ fn limit(
         Some((a, v_bl)) => writeln!(md, "Recht–Ipson `v_r = a (v_i² − v_bl²)^½` fitted (least squares in `v_r²` against `v_i²`) to the {} perforating runs: a = {a:.3}, **ballistic limit v_bl = {v_bl:.0} m/s** ({:+.0}% against the test's {BALLISTIC_LIMIT} m/s).", perforating.len(), (v_bl / BALLISTIC_LIMIT - 1.0) * 100.0)?,
         None => writeln!(md, "Fewer than two runs perforated: no Recht–Ipson fit.")?,
     }
-    std::fs::write(out.join(format!("limit_{cells}cells_{clamp_mm}mm.md")), md)?;
+    std::fs::write(&path, md)?;
     Ok(())
 }
 

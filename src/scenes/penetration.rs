@@ -265,9 +265,10 @@ impl Penetration {
     }
 }
 
-/// The Recht–Ipson (1963) residual-speed curve `v_r² = a² (v_i² − v_bl²)` fitted by least squares in `v_r²` against `v_i²` to
-/// `(v_i, v_r)` pairs of perforating impacts: `(a, v_bl)`, the mass factor and the ballistic
-/// limit, or `None` with fewer than two pairs or no positive slope.
+/// The Recht–Ipson (1963) residual-speed curve `v_r² = a² (v_i² − v_bl²)` fitted by least
+/// squares in `v_r²` against `v_i²` to `(v_i, v_r)` pairs of perforating impacts: `(a, v_bl)`,
+/// the mass factor and the ballistic limit, or `None` with fewer than two pairs or no positive
+/// slope.
 pub fn recht_ipson_fit(runs: &[(f64, f64)]) -> Option<(f64, f64)> {
     if runs.len() < 2 {
         return None;
