@@ -3,20 +3,23 @@
 
 use rkmpm::scenes::{log_log_slope, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 
-/// Aspect ratio 2 at 8 cells across the column (512 particles, about 4 s in release). Measured:
-/// run-out (L∞ − L0)/L0 = 5.78 against 6.30 from the law, final height H∞/L0 = 0.831 against
-/// 0.887. Asserted: [`settled_inside_the_measured_band`].
-#[test]
-fn coarse_column_collapse_settles_inside_the_measured_band() {
-    let a = 2.0;
-    let r = GranularColumn {
+/// The scene's column of aspect ratio `a` at 8 cells across, run to rest.
+fn coarse_column(a: f64) -> CollapseResult {
+    GranularColumn {
         aspect: a,
         cells_across: 8,
         ..Default::default()
     }
     .run()
-    .unwrap();
-    settled_inside_the_measured_band(&r);
+    .unwrap()
+}
+
+/// Aspect ratio 2 at 8 cells across the column (512 particles, about 4 s in release). Measured:
+/// run-out (L∞ − L0)/L0 = 5.78 against 6.30 from the law, final height H∞/L0 = 0.831 against
+/// 0.887. Asserted: [`settled_inside_the_measured_band`].
+#[test]
+fn coarse_column_collapse_settles_inside_the_measured_band() {
+    settled_inside_the_measured_band(&coarse_column(2.0));
 }
 
 /// The run-out's change of regime: growing about as `a` for the lower columns and as the law's
@@ -24,19 +27,13 @@ fn coarse_column_collapse_settles_inside_the_measured_band() {
 /// measured run-outs 5.78, 8.55, 11.64, 16.40, 19.81: fitted exponent 1.01 over a = 2–4 and 0.77
 /// over a = 4–8 (16 cells: 0.95 and 0.69). Asserted: the tall exponent within the 15% of
 /// 0.73, and at least 0.15 below the lower one (measured gaps 0.24 and 0.26 at 8 and 16 cells;
-/// a rate-independent model without the bend would give equal exponents).
+/// equal exponents would mean no change of regime).
 #[test]
 fn tall_columns_run_out_bends_to_the_measured_exponent() {
     let runouts: Vec<(f64, f64)> = [2.0, 3.0, 4.0, 6.0, 8.0]
         .iter()
         .map(|&a| {
-            let r = GranularColumn {
-                aspect: a,
-                cells_across: 8,
-                ..Default::default()
-            }
-            .run()
-            .unwrap();
+            let r = coarse_column(a);
             assert_eq!(r.mass_change, 0.0);
             assert!(r.final_kinetic < 1e-6, "not at rest: {r:?}");
             (a, r.normalized_runout)
@@ -81,13 +78,7 @@ fn settled_inside_the_measured_band(r: &CollapseResult) {
 /// A column lower than a = 0.65 keeps its top (Nguyen, Bui & Fukagawa): only a wedge slides.
 #[test]
 fn low_column_keeps_its_top() {
-    let r = GranularColumn {
-        aspect: 0.5,
-        cells_across: 8,
-        ..Default::default()
-    }
-    .run()
-    .unwrap();
+    let r = coarse_column(0.5);
     // Measured H∞/L0 = 0.487 against 0.5: the top sinks by the elastic compression and a quarter
     // particle spacing of settling (h/4 = 0.03 L0 here).
     assert!(
