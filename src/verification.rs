@@ -237,13 +237,22 @@ pub fn mms_errors<const D: usize>(mms: &AxisAlignedMms, sim: &Sim<D>, t: f64) ->
 
 /// Least-squares slope of `log(error)` against `log(h)`.
 pub fn fitted_slope(h: &[f64], error: &[f64]) -> f64 {
-    let n = h.len() as f64;
-    let lx: Vec<f64> = h.iter().map(|v| v.ln()).collect();
-    let ly: Vec<f64> = error.iter().map(|v| v.ln()).collect();
-    let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
-    let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
-    let sxx: f64 = lx.iter().map(|x| (x - mx) * (x - mx)).sum();
-    sxy / sxx
+    let points: Vec<(f64, f64)> = h.iter().zip(error).map(|(h, e)| (h.ln(), e.ln())).collect();
+    least_squares_line(&points).0
+}
+
+/// The least-squares line `y = slope x + intercept` through `(x, y)` points: `(slope,
+/// intercept)` (NaN with fewer than two distinct `x`).
+pub fn least_squares_line(points: &[(f64, f64)]) -> (f64, f64) {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + (x - mx) * (y - my), b + (x - mx).powi(2))
+    });
+    let slope = sxy / sxx;
+    (slope, my - slope * mx)
 }
 
 #[cfg(test)]

@@ -245,14 +245,8 @@ pub fn thick_front(positions: &[Vector<2>], q: f64, thickness: f64) -> f64 {
 /// The least-squares slope of `ln y` against `ln x`: the exponent of a power law through the
 /// points `(x, y)`.
 pub fn log_log_slope(points: &[(f64, f64)]) -> f64 {
-    let n = points.len() as f64;
-    let (mx, my) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
-        (a + x.ln() / n, b + y.ln() / n)
-    });
-    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
-        (a + (x.ln() - mx) * (y.ln() - my), b + (x.ln() - mx).powi(2))
-    });
-    sxy / sxx
+    let logs: Vec<(f64, f64)> = points.iter().map(|(x, y)| (x.ln(), y.ln())).collect();
+    crate::verification::least_squares_line(&logs).0
 }
 
 /// `σ_zz` of a plane-strain particle from its in-plane stress and pressure `−tr(σ)/3`.

@@ -273,17 +273,13 @@ pub fn recht_ipson_fit(runs: &[(f64, f64)]) -> Option<(f64, f64)> {
     if runs.len() < 2 {
         return None;
     }
-    let n = runs.len() as f64;
-    let (x, y): (Vec<f64>, Vec<f64>) = runs.iter().map(|(vi, vr)| (vi * vi, vr * vr)).unzip();
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let sxy: f64 = x.iter().zip(&y).map(|(x, y)| (x - mx) * (y - my)).sum();
-    let sxx: f64 = x.iter().map(|x| (x - mx).powi(2)).sum();
-    let slope = sxy / sxx;
+    let squares: Vec<(f64, f64)> = runs.iter().map(|(vi, vr)| (vi * vi, vr * vr)).collect();
+    // v_r² = a² v_i² − a² v_bl²: slope a², intercept −a² v_bl².
+    let (slope, intercept) = crate::verification::least_squares_line(&squares);
     if slope.is_nan() || slope <= 0.0 {
         return None;
     }
-    let v_bl2 = mx - my / slope;
-    Some((slope.sqrt(), v_bl2.max(0.0).sqrt()))
+    Some((slope.sqrt(), (-intercept / slope).max(0.0).sqrt()))
 }
 
 /// Which particles of material `plate` are joined to its clamped edge (reference distance from
