@@ -30,6 +30,13 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
+ * How far the gate reaches above the column's top at the start, and how far above it the lifted
+ * gate is held, in cells: beyond the reach of every shape function here (support radius up to
+ * 2 cells on either side), so the gate's ends never share a grid node with the column's top.
+ */
+#define GATE_CLEARANCE 5.0
+
+/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -493,6 +500,19 @@ enum RkmpmStatus rkmpm_sim_add_material_rigid(struct RkmpmSim *sim,
                                               double density,
                                               const double *velocity,
                                               uint32_t *out_id);
+
+/**
+ * Changes the prescribed velocity of the rigid material `material` (`dim` finite values) for
+ * the steps that follow, and its particles' velocity with it: a gate lifted and then held, a
+ * piston that stops. Fails for an unknown material (`RKMPM_ERR_UNKNOWN_MATERIAL`), one that is
+ * not rigid or a non-finite value, and then changes nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle; `velocity` must hold `dim` values.
+ */
+enum RkmpmStatus rkmpm_sim_set_rigid_velocity(struct RkmpmSim *sim,
+                                              uint32_t material,
+                                              const double *velocity);
 
 /**
  * Chooses USL or MUSL (before the first step).

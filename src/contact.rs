@@ -16,6 +16,9 @@
 //!   exactly. With more bodies at a node each uses its own `g_b/|g_b|`.
 //! * Rigid bodies move with their prescribed velocity and do not deform; at a shared node their
 //!   velocity replaces `v_cm` (infinite mass), so they push the others and are not pushed back.
+//!   The normal there is the rigid body's own, `−g_r/|g_r|` into it: its surface is exact, while
+//!   the difference of the two gradients tilts at the corner of a deformable body beside it, and
+//!   a rigid plate sliding past that corner then drags it along even without friction.
 
 use crate::grid::GridNodes;
 use crate::Vector;
@@ -57,6 +60,13 @@ pub fn correct_velocities<const D: usize>(
                 p / m
             }
         };
+        // A rigid body's surface is exact (it never deforms), so its own mass gradient gives
+        // the normal: into it, `−g_r/|g_r|`, for every body it touches here.
+        let rigid_normal = here
+            .iter()
+            .find(|&&b| rigid[b].is_some())
+            .map(|&r| -bodies[r].mass_gradient[n])
+            .and_then(|g| (g.norm() > 0.0).then(|| g / g.norm()));
         let pair_normal = (here.len() == 2).then(|| {
             let (a, b) = (here[0], here[1]);
             let d = bodies[a].mass_gradient[n] - bodies[b].mass_gradient[n];
@@ -66,15 +76,16 @@ pub fn correct_velocities<const D: usize>(
             if rigid[b].is_some() {
                 continue;
             }
-            let normal = match pair_normal {
-                Some(Some(n_a)) => {
+            let normal = match (rigid_normal, pair_normal) {
+                (Some(into_rigid), _) => into_rigid,
+                (None, Some(Some(n_a))) => {
                     if k == 0 {
                         n_a
                     } else {
                         -n_a
                     }
                 }
-                _ => {
+                (None, _) => {
                     let g = bodies[b].mass_gradient[n];
                     if g.norm() == 0.0 {
                         continue;

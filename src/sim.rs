@@ -386,6 +386,42 @@ impl<const D: usize> Sim<D> {
         }
     }
 
+    /// Changes the prescribed velocity of the rigid material `material` (only the first `D`
+    /// components are used), for the steps that follow: a gate lifted and then stopped, a piston
+    /// that reverses. Fails for an unknown material, one that is not rigid, or a non-finite
+    /// velocity, and then changes nothing.
+    pub fn set_rigid_velocity(&mut self, material: u32, velocity: [f64; 3]) -> Result<()> {
+        for v in velocity {
+            check_finite("velocity", v)?;
+        }
+        let count = self.materials.len();
+        match self.materials.get_mut(material as usize) {
+            Some(Material::Rigid(body)) => {
+                body.velocity = velocity;
+                // Its particles move with it from now on, and the stable step sees their speed.
+                let v = Vector::<D>::from_fn(|i, _| velocity[i]);
+                let ps = &mut self.particles;
+                for (vp, _) in ps
+                    .velocity
+                    .iter_mut()
+                    .zip(&ps.material)
+                    .filter(|(_, &m)| m == material)
+                {
+                    *vp = v;
+                }
+                self.work.signal_speed = None;
+                Ok(())
+            }
+            Some(_) => Err(Error::invalid(format!(
+                "material {material} is not rigid; only a rigid body has a prescribed velocity"
+            ))),
+            None => Err(Error::new(
+                ErrorKind::UnknownMaterial,
+                format!("material {material} does not exist ({count} added so far)"),
+            )),
+        }
+    }
+
     /// Adds particles of one material. All-or-nothing: on any error no particle is added.
     ///
     /// Requires finite positions inside the domain, finite positive volumes, finite velocities

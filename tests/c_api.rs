@@ -746,6 +746,36 @@ fn contact_and_rigid_bodies_through_the_c_api() {
         assert_eq!(&x[..128], &slab[..], "the rigid slab moved");
         let lowest = (64..128).map(|p| x[2 * p + 1]).fold(1.0, f64::min);
         assert!(lowest > 0.3, "the block sank into the slab: {lowest}");
+        // Slide the slab sideways for one step, then hold it: it moves by exactly v dt.
+        let slide = [0.5, 0.0];
+        assert_eq!(
+            rkmpm_sim_set_rigid_velocity(sim, 0, slide.as_ptr()),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK, "{}", last_error());
+        assert_eq!(
+            rkmpm_sim_set_rigid_velocity(sim, 0, still.as_ptr()),
+            RKMPM_OK
+        );
+        assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK, "{}", last_error());
+        let mut moved = vec![0.0; 256];
+        assert_eq!(
+            rkmpm_sim_get_particles(sim, RKMPM_FIELD_POSITION, moved.as_mut_ptr(), 256),
+            RKMPM_OK
+        );
+        for k in 0..128 {
+            let expected = slab[k] + if k % 2 == 0 { 0.5 * dt } else { 0.0 };
+            assert!(
+                (moved[k] - expected).abs() < 1e-15,
+                "slab coordinate {k}: {} against {expected}",
+                moved[k]
+            );
+        }
+        assert_eq!(
+            rkmpm_sim_set_rigid_velocity(sim, soft, slide.as_ptr()),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(last_error().contains("not rigid"), "{}", last_error());
         rkmpm_sim_free(sim);
     }
 }

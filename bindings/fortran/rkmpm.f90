@@ -176,6 +176,7 @@ module rkmpm
       procedure :: add_material_drucker_prager => sim_add_material_drucker_prager
       procedure :: add_material_johnson_cook => sim_add_material_johnson_cook
       procedure :: add_material_rigid => sim_add_material_rigid
+      procedure :: set_rigid_velocity => sim_set_rigid_velocity
       procedure :: set_contact => sim_set_contact
       procedure :: set_drucker_prager_rheology => sim_set_drucker_prager_rheology
       procedure :: save => sim_save
@@ -391,6 +392,16 @@ module rkmpm
          real(c_double), intent(in) :: velocity(*)
          integer(c_int32_t), intent(out) :: out_id
       end function rkmpm_sim_add_material_rigid
+
+      ! enum RkmpmStatus rkmpm_sim_set_rigid_velocity(struct RkmpmSim *sim, uint32_t material,
+      !                                              const double *velocity);
+      integer(c_int) function rkmpm_sim_set_rigid_velocity(sim, material, velocity) &
+         bind(C, name="rkmpm_sim_set_rigid_velocity")
+         import :: c_int, c_ptr, c_double, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: material
+         real(c_double), intent(in) :: velocity(*)
+      end function rkmpm_sim_set_rigid_velocity
 
       ! enum RkmpmStatus rkmpm_sim_set_contact(struct RkmpmSim *sim, uint32_t enabled, double friction);
       integer(c_int) function rkmpm_sim_set_contact(sim, enabled, friction) &
@@ -957,6 +968,27 @@ contains
       if (present(errmsg)) errmsg = text
       id = out_id
    end subroutine sim_add_material_rigid
+
+   !> Changes the prescribed velocity(dim) of the rigid `material` for the steps that follow.
+   subroutine sim_set_rigid_velocity(self, material, velocity, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: material
+      real(c_double), intent(in) :: velocity(:)
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      if (c_associated(self%h)) then
+         if (size(velocity) /= handle_dim(self%h)) then
+            call report(RKMPM_ERR_INVALID_ARGUMENT, 'set_rigid_velocity', stat, text, &
+                        'velocity must hold dim values')
+            if (present(errmsg)) errmsg = text
+            return
+         end if
+      end if
+      call report(rkmpm_sim_set_rigid_velocity(self%h, material, velocity), &
+                  'set_rigid_velocity', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_rigid_velocity
 
    !> Turns contact between bodies on (enabled = .true., Coulomb friction) or off.
    subroutine sim_set_contact(self, enabled, friction, stat, errmsg)

@@ -381,6 +381,17 @@ static void rigid_rejects(uint32_t dim, double density, const double *velocity) 
   drop(&f);
 }
 
+/* A rigid body (material 1, moving at 0.5 along x) beside the fixture's elastic material 0, and
+   `rkmpm_sim_set_rigid_velocity` on `material` with `velocity`. */
+static void rigid_velocity_rejects(uint32_t dim, uint32_t material, const double *velocity) {
+  Fixture f = block(dim);
+  const double v0[3] = {0.5, 0.0, 0.0};
+  uint32_t plate = 77;
+  RKMPM_CHECK(rkmpm_sim_add_material_rigid(f.sim, 1000.0, v0, &plate));
+  CALL(f.sim, rkmpm_sim_set_rigid_velocity(f.sim, material, velocity));
+  drop(&f);
+}
+
 /* ---- particles and boundary points ---------------------------------------------------------- */
 
 /* Two 2D particles, the first one valid: all or nothing. */
@@ -1493,6 +1504,34 @@ static void material_rows(void) {
   ROW("add_material_rigid.velocity_infinite", RKMPM_ERR_INVALID_ARGUMENT) {
     const double v[2] = {-INFINITY, 0.0};
     rigid_rejects(2, 1.0, v);
+  }
+
+  /* ---- rkmpm_sim_set_rigid_velocity ---- */
+  ROW("set_rigid_velocity.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_rigid_velocity(NULL, 1, still));
+  }
+  ROW("set_rigid_velocity.null_velocity", RKMPM_ERR_NULL_POINTER) {
+    rigid_velocity_rejects(2, 1, NULL);
+    rigid_velocity_rejects(3, 1, NULL);
+  }
+  ROW("set_rigid_velocity.misaligned_velocity", RKMPM_ERR_INVALID_ARGUMENT) {
+    rigid_velocity_rejects(2, 1, misaligned(raw));
+  }
+  ROW("set_rigid_velocity.velocity_nan", RKMPM_ERR_INVALID_ARGUMENT) {
+    const double v2[2] = {0.0, NAN}, v3[3] = {0.0, 0.0, NAN};
+    rigid_velocity_rejects(2, 1, v2);
+    rigid_velocity_rejects(3, 1, v3);
+  }
+  ROW("set_rigid_velocity.velocity_infinite", RKMPM_ERR_INVALID_ARGUMENT) {
+    const double v[2] = {INFINITY, 0.0};
+    rigid_velocity_rejects(2, 1, v);
+  }
+  ROW("set_rigid_velocity.unknown_material", RKMPM_ERR_UNKNOWN_MATERIAL) {
+    rigid_velocity_rejects(2, 2, still);
+    rigid_velocity_rejects(2, UINT32_MAX, still);
+  }
+  ROW("set_rigid_velocity.not_rigid", RKMPM_ERR_INVALID_ARGUMENT) {
+    rigid_velocity_rejects(2, 0, still); /* material 0 is elastic */
   }
 }
 

@@ -205,6 +205,10 @@ program error_handling
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'negative contact friction')
    call sim%add_material_rigid(1000.0_c_double, [0.0_c_double], mat3, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'rigid velocity of the wrong length')
+   call sim%set_rigid_velocity(0_c_int32_t, [0.0_c_double], stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'set_rigid_velocity of the wrong length')
+   call sim%set_rigid_velocity(99_c_int32_t, [0.0_c_double, 0.0_c_double], stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_UNKNOWN_MATERIAL, msg, 'set_rigid_velocity of an unknown material')
    call sim%load('/nonexistent-dir/x.rkmpm', stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_STATE, msg, 'load into an initialized object')
 

@@ -20,6 +20,8 @@
 //!   velocity smoothing dissipates energy where the velocity jumps, as at the column's impact).
 //! * `--rheology d,Δμ,I0`: the μ(I) rate dependence of the friction (grain diameter in m, the
 //!   friction gained at large inertial numbers, the reference inertial number); none by default.
+//! * `--gate SPEED[,FRICTION]`: lift a rigid gate at `SPEED` m/s instead of releasing the column
+//!   at once, meeting the soil with Coulomb friction `FRICTION` (default 0, a smooth gate).
 //! * `--thick k1,k2,..`: also the run-out of the part of the deposit thicker than `k` particle
 //!   spacings (`thick_front`), per `k`.
 //!
@@ -27,7 +29,7 @@
 
 use rkmpm::boundary::Boundary;
 use rkmpm::material::InertialRheology;
-use rkmpm::scenes::{log_log_slope, thick_front, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+use rkmpm::scenes::{log_log_slope, thick_front, Gate, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 use rkmpm::{Integration, Shape};
 
 /// One aspect ratio's normalized results for the exponents: aspect ratio, run-out, height, and
@@ -105,9 +107,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         base.rheology = Some(InertialRheology::new(v[1], v[2], v[0])?);
     }
+    if let Some(g) = value("--gate") {
+        let v: Vec<f64> = g.split(',').map(str::parse).collect::<Result<_, _>>()?;
+        base.gate = match v[..] {
+            [speed] => Some(Gate {
+                speed,
+                friction: 0.0,
+            }),
+            [speed, friction] => Some(Gate { speed, friction }),
+            _ => return Err("--gate SPEED[,FRICTION]".into()),
+        };
+    }
     println!(
-        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, φ {}°, ψ {}°, floor μ {:.3}, method {method}, transfer {:?}, rheology {:?}\n",
-        base.young, base.friction_degrees, base.dilatancy_degrees, base.floor_friction, base.transfer, base.rheology
+        "cells {cells}, wall {wall}, rods {rods}, E {:.3e}, φ {}°, ψ {}°, floor μ {:.3}, method {method}, transfer {:?}, rheology {:?}, gate {:?}\n",
+        base.young, base.friction_degrees, base.dilatancy_degrees, base.floor_friction, base.transfer, base.rheology, base.gate
     );
     let thick: Vec<f64> = value("--thick").map_or(Ok(Vec::new()), |v| {
         v.split(',').map(str::parse).collect::<Result<_, _>>()
@@ -131,11 +144,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let h_law = NGUYEN_BUI_FUKAGAWA.final_height(a);
         let ratio = |x: f64| law.map_or("–".into(), |l| format!("{:.3}", x / l));
         let q = sim.grid().cell_size / 2.0;
+        // The soil's particles only (a gate is material 1).
+        let ps = sim.particles();
+        let soil: Vec<_> = (0..ps.len())
+            .filter(|&p| ps.material[p] == 0)
+            .map(|p| ps.position[p])
+            .collect();
         let thick_runouts: Vec<f64> = thick
             .iter()
-            .map(|k| {
-                (thick_front(&sim.particles().position, q, k * q) - column.width) / column.width
-            })
+            .map(|k| (thick_front(&soil, q, k * q) - column.width) / column.width)
             .collect();
         let thick_cells: String = thick_runouts
             .iter()

@@ -494,6 +494,30 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_rigid(
     })
 }
 
+/// Changes the prescribed velocity of the rigid material `material` (`dim` finite values) for
+/// the steps that follow, and its particles' velocity with it: a gate lifted and then held, a
+/// piston that stops. Fails for an unknown material (`RKMPM_ERR_UNKNOWN_MATERIAL`), one that is
+/// not rigid or a non-finite value, and then changes nothing.
+///
+/// # Safety
+/// `sim` must be a live handle; `velocity` must hold `dim` values.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_rigid_velocity(
+    sim: *mut RkmpmSim,
+    material: u32,
+    velocity: *const f64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_rigid_velocity", || {
+        let s = sim_mut(sim)?;
+        let d = with_sim!(&s.sim, m => m.grid().cells.len());
+        let v = slice("velocity", velocity, d)?;
+        let mut v3 = [0.0; 3];
+        v3[..d].copy_from_slice(v);
+        with_sim!(&mut s.sim, m => m.set_rigid_velocity(material, v3))?;
+        Ok(())
+    })
+}
+
 /// Chooses USL or MUSL (before the first step).
 ///
 /// # Safety

@@ -69,6 +69,27 @@ pub struct GranularColumn {
     pub transfer: Transfer,
     /// The μ(I) rate dependence of the soil's friction (none by default).
     pub rheology: Option<InertialRheology>,
+    /// The gate that holds the column before the release: `None` (the default) releases the
+    /// whole column at once, as if the gate vanished.
+    pub gate: Option<Gate>,
+}
+
+/// How far the gate reaches above the column's top at the start, and how far above it the lifted
+/// gate is held, in cells: beyond the reach of every shape function here (support radius up to
+/// 2 cells on either side), so the gate's ends never share a grid node with the column's top.
+pub const GATE_CLEARANCE: f64 = 5.0;
+
+/// A gate lifted at a finite speed instead of an instant release: a rigid plate one cell thick
+/// against the column's free side, from the floor to [`GATE_CLEARANCE`] cells above the top,
+/// moving up at `speed` until its lower edge is that far above the column's top, then held
+/// there. Its ends so stay out of reach of the soil's shape functions: where they overlap, the
+/// contact normal tilts round the gate's corner and the moving gate would kick the soil's top. It meets the soil through the grid
+/// contact with Coulomb friction `friction` (0: a smooth gate).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gate {
+    /// Lifting speed (m/s).
+    pub speed: f64,
+    pub friction: f64,
 }
 
 impl Default for GranularColumn {
@@ -92,6 +113,7 @@ impl Default for GranularColumn {
             integration: Integration::MaterialPoint,
             transfer: Transfer::Apic,
             rheology: None,
+            gate: None,
         }
     }
 }
@@ -127,11 +149,25 @@ impl GranularColumn {
                 "aspect must be positive and cells_across >= 2",
             ));
         }
+        if let Some(gate) = self.gate {
+            if !(gate.speed > 0.0 && gate.speed.is_finite()) {
+                return Err(Error::invalid(format!(
+                    "the gate's speed must be positive, got {}",
+                    gate.speed
+                )));
+            }
+        }
         let h = self.width / self.cells_across as f64;
         let h0 = self.aspect * self.width;
         let reach = 1.0 + 1.6 * NGUYEN_BUI_FUKAGAWA.runout(self.aspect.max(0.65)).unwrap();
         let cells_x = (reach * self.width / h).ceil() as usize + 4;
-        let cells_y = (h0 / h).ceil() as usize + 4;
+        // A lifted gate ends with its lower edge GATE_CLEARANCE cells above the column, its
+        // top H0 + GATE_CLEARANCE h higher.
+        let room = match self.gate {
+            Some(_) => 2.0 * (h0 + GATE_CLEARANCE * h),
+            None => h0,
+        };
+        let cells_y = (room / h).ceil() as usize + 4;
         let mut sim = Sim::<2>::new([0.0, 0.0], [cells_x, cells_y], h)?;
         sim.set_shape(self.shape)?;
         sim.set_integration(self.integration)?;
@@ -152,7 +188,27 @@ impl GranularColumn {
             .map(|k| Vector::<2>::new(((k % nx) as f64 + 0.5) * q, ((k / nx) as f64 + 0.5) * q))
             .collect();
         sim.add_particles(mat, &x, &vec![q * q; x.len()], None)?;
+        if let Some(gate) = self.gate {
+            sim.set_contact(Some(gate.friction))?;
+            let plate = sim.add_material(Material::rigid(self.density, [0.0, gate.speed, 0.0])?);
+            // Rows of q = h/2 up to GATE_CLEARANCE cells above the column.
+            let rows = ny + 2 * GATE_CLEARANCE as usize;
+            let x: Vec<Vector<2>> = (0..2 * rows)
+                .map(|k| {
+                    let (i, j) = ((k % 2) as f64, (k / 2) as f64);
+                    Vector::<2>::new(self.width + (i + 0.5) * q, (j + 0.5) * q)
+                })
+                .collect();
+            sim.add_particles(plate, &x, &vec![q * q; x.len()], None)?;
+        }
         Ok(sim)
+    }
+
+    /// When the gate's lower edge is [`GATE_CLEARANCE`] cells above the column's top.
+    fn gate_lifted_at(&self) -> Option<f64> {
+        let h = self.width / self.cells_across as f64;
+        self.gate
+            .map(|gate| (self.aspect * self.width + GATE_CLEARANCE * h) / gate.speed)
     }
 
     /// Runs the collapse to `duration · sqrt(H0 / g)` at CFL 0.3 and measures the heap.
@@ -170,19 +226,45 @@ impl GranularColumn {
         let mut sim = self.build()?;
         let h0 = self.aspect * self.width;
         let t_end = self.duration * (h0 / self.gravity).sqrt();
-        let mass0: f64 = sim.particles().mass.iter().sum();
-        let seconds =
-            super::run_with_frames(&mut sim, t_end, 0.3, frames, &mut on_frame, &|_| false)?;
+        let ps = sim.particles();
+        let mass0: f64 = (0..ps.len())
+            .filter(|&p| ps.material[p] == 0)
+            .map(|p| ps.mass[p])
+            .sum();
+        let mut lift = self.gate_lifted_at();
+        let mut hold_the_gate = |sim: &mut Sim<2>| {
+            if lift.is_some_and(|t| sim.time() >= t) {
+                sim.set_rigid_velocity(1, [0.0; 3])?;
+                lift = None;
+            }
+            Ok(false)
+        };
+        let seconds = super::run_with_frames(
+            &mut sim,
+            t_end,
+            0.3,
+            frames,
+            &mut on_frame,
+            &mut hold_the_gate,
+        )?;
         let q = sim.grid().cell_size / 2.0;
         let ps = sim.particles();
-        let runout = deposit_front(&ps.position, q);
-        let height = ps.position.iter().map(|x| x[1]).fold(0.0, f64::max) + q / 2.0;
-        let mass: f64 = ps.mass.iter().sum();
+        // The soil only (the gate, if any, is material 1).
+        let soil: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == 0).collect();
+        let position: Vec<Vector<2>> = soil.iter().map(|&p| ps.position[p]).collect();
+        let runout = deposit_front(&position, q);
+        let height = position.iter().map(|x| x[1]).fold(0.0, f64::max) + q / 2.0;
+        let mass: f64 = soil.iter().map(|&p| ps.mass[p]).sum();
+        let kinetic: f64 = soil
+            .iter()
+            .map(|&p| 0.5 * ps.mass[p] * ps.velocity[p].norm_squared())
+            .sum();
         let Material::DruckerPrager(dp) = sim.materials()[0] else {
             unreachable!("the column is Drucker–Prager")
         };
-        let worst_yield = (0..ps.len())
-            .map(|p| {
+        let worst_yield = soil
+            .iter()
+            .map(|&p| {
                 let j = crate::determinant(&ps.deformation_gradient[p]);
                 let mut tau = crate::material::embed3(&ps.stress[p]) * j;
                 tau[(2, 2)] = out_of_plane_stress(&ps.stress[p], ps.pressure[p]) * j;
@@ -195,11 +277,11 @@ impl GranularColumn {
             height,
             normalized_runout: (runout - self.width) / self.width,
             normalized_height: height / self.width,
-            final_kinetic: ps.kinetic_energy() / (mass0 * self.gravity * h0),
+            final_kinetic: kinetic / (mass0 * self.gravity * h0),
             worst_yield,
             mass_change: (mass - mass0).abs() / mass0,
             steps: sim.steps() as usize,
-            particles: ps.len(),
+            particles: soil.len(),
             seconds,
         };
         Ok((result, sim))

@@ -196,15 +196,16 @@ pub fn run_vibrating_bar<const D: usize>(
 }
 
 /// Steps `sim` to `t_end` at `cfl` times the stable step, calling `on_frame` at the start,
-/// `frames` times evenly over the run and at the end (none when `frames` is 0), and stopping
-/// early after a step where `stop(sim)` holds. Returns the wall time in seconds.
+/// `frames` times evenly over the run and at the end (none when `frames` is 0), and calling
+/// `after_step(sim)` after every step: it may change what the scene prescribes (a rigid body's
+/// velocity) and stops the run early by returning `true`. Returns the wall time in seconds.
 pub fn run_with_frames<const D: usize>(
     sim: &mut Sim<D>,
     t_end: f64,
     cfl: f64,
     frames: usize,
     on_frame: &mut dyn FnMut(&Sim<D>) -> Result<()>,
-    stop: &dyn Fn(&Sim<D>) -> bool,
+    after_step: &mut dyn FnMut(&mut Sim<D>) -> Result<bool>,
 ) -> Result<f64> {
     let start = std::time::Instant::now();
     let mut next_frame = 0;
@@ -216,7 +217,7 @@ pub fn run_with_frames<const D: usize>(
         // The last step lands on t_end (the small excess keeps round-off from adding a step).
         let dt = sim.stable_dt(cfl)?.min(t_end - sim.time() + 1e-12 * t_end);
         sim.step(dt)?;
-        if stop(sim) {
+        if after_step(sim)? {
             break;
         }
     }
@@ -228,7 +229,8 @@ pub fn run_with_frames<const D: usize>(
 
 mod collapse;
 pub use collapse::{
-    deposit_front, log_log_slope, thick_front, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA,
+    deposit_front, log_log_slope, thick_front, CollapseResult, Gate, GranularColumn,
+    GATE_CLEARANCE, NGUYEN_BUI_FUKAGAWA,
 };
 
 mod taylor;

@@ -200,9 +200,9 @@ impl Penetration {
         mut on_frame: impl FnMut(&Sim<D>) -> Result<()>,
     ) -> Result<(PenetrationResult, Sim<D>)> {
         let mut sim = self.build::<D>()?;
-        let near_bottom = |sim: &Sim<D>| {
+        let mut near_bottom = |sim: &mut Sim<D>| {
             let floor = 2.0 * sim.grid().cell_size;
-            sim.particles().position.iter().any(|x| x[D - 1] < floor)
+            Ok(sim.particles().position.iter().any(|x| x[D - 1] < floor))
         };
         let seconds = super::run_with_frames(
             &mut sim,
@@ -210,7 +210,7 @@ impl Penetration {
             0.3,
             frames,
             &mut on_frame,
-            &near_bottom,
+            &mut near_bottom,
         )?;
         let back = self.space_below * self.plate_thickness;
         let ps = sim.particles();

@@ -169,8 +169,14 @@ impl TaylorBar {
         let mut sim = self.build()?;
         let (_, _, _, t_end) = self.case.geometry();
         let ke0 = sim.particles().kinetic_energy();
-        let seconds =
-            super::run_with_frames(&mut sim, t_end, self.cfl, frames, &mut on_frame, &|_| false)?;
+        let seconds = super::run_with_frames(
+            &mut sim,
+            t_end,
+            self.cfl,
+            frames,
+            &mut on_frame,
+            &mut |_| Ok(false),
+        )?;
         let q = sim.grid().cell_size / 2.0;
         let ps = sim.particles();
         let final_length = ps.position.iter().map(|x| x[2]).fold(0.0, f64::max) + q / 2.0;
