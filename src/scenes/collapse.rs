@@ -83,12 +83,13 @@ pub const GATE_CLEARANCE: f64 = 5.0;
 /// against the column's free side, from the floor to [`GATE_CLEARANCE`] cells above the top,
 /// moving up at `speed` until its lower edge is that far above the column's top, then held
 /// there. Its ends so stay out of reach of the soil's shape functions: where they overlap, the
-/// contact normal tilts round the gate's corner and the moving gate would kick the soil's top. It meets the soil through the grid
-/// contact with Coulomb friction `friction` (0: a smooth gate).
+/// contact normal tilts round the gate's corner and the moving gate would kick the soil's top.
+/// It meets the soil through the grid contact.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gate {
     /// Lifting speed (m/s).
     pub speed: f64,
+    /// Coulomb friction coefficient between gate and soil (0: a smooth gate).
     pub friction: f64,
 }
 
