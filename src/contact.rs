@@ -49,7 +49,9 @@ pub fn correct_velocities<const D: usize>(
         if here.len() < 2 {
             continue;
         }
-        let v_cm = match here.iter().find_map(|&b| rigid[b]) {
+        // A rigid body here sets the velocity (infinite mass) and the normal.
+        let rigid_body = here.iter().copied().find(|&b| rigid[b].is_some());
+        let v_cm = match rigid_body.and_then(|r| rigid[r]) {
             Some(v) => v,
             None => {
                 let (mut p, mut m) = (Vector::<D>::zeros(), 0.0);
@@ -62,10 +64,8 @@ pub fn correct_velocities<const D: usize>(
         };
         // A rigid body's surface is exact (it never deforms), so its own mass gradient gives
         // the normal: into it, `−g_r/|g_r|`, for every body it touches here.
-        let rigid_normal = here
-            .iter()
-            .find(|&&b| rigid[b].is_some())
-            .map(|&r| -bodies[r].mass_gradient[n])
+        let rigid_normal = rigid_body
+            .map(|r| -bodies[r].mass_gradient[n])
             .and_then(|g| (g.norm() > 0.0).then(|| g / g.norm()));
         let pair_normal = (here.len() == 2).then(|| {
             let (a, b) = (here[0], here[1]);

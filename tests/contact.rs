@@ -5,16 +5,21 @@ use rkmpm::{
     Boundary, ErrorKind, Field, Integration, Material, Scheme, Shape, Side, Sim, Transfer, Vector,
 };
 
-/// A square block of `n × n` particles (2 per cell) with lower-left corner `corner`.
-fn block(corner: [f64; 2], n: usize, q: f64) -> Vec<Vector<2>> {
-    (0..n * n)
+/// A rectangle of `nx × ny` particles of spacing `q` with lower-left corner `corner`.
+fn rectangle(corner: [f64; 2], nx: usize, ny: usize, q: f64) -> Vec<Vector<2>> {
+    (0..nx * ny)
         .map(|k| {
             Vector::<2>::new(
-                corner[0] + ((k % n) as f64 + 0.5) * q,
-                corner[1] + ((k / n) as f64 + 0.5) * q,
+                corner[0] + ((k % nx) as f64 + 0.5) * q,
+                corner[1] + ((k / nx) as f64 + 0.5) * q,
             )
         })
         .collect()
+}
+
+/// A square block of `n × n` particles (2 per cell) with lower-left corner `corner`.
+fn block(corner: [f64; 2], n: usize, q: f64) -> Vec<Vector<2>> {
+    rectangle(corner, n, n, q)
 }
 
 /// Two elastic blocks meet head on while sliding past each other (opposite tangential
@@ -177,14 +182,7 @@ fn block_bounces_off_a_rigid_slab() {
     let slab = sim.add_material(Material::rigid(7800.0, [0.0; 3]).unwrap());
     let body = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
     let q = h / 2.0;
-    let xs: Vec<Vector<2>> = (0..36 * 4)
-        .map(|k| {
-            Vector::<2>::new(
-                0.05 + ((k % 36) as f64 + 0.5) * q,
-                0.3 + ((k / 36) as f64 + 0.5) * q,
-            )
-        })
-        .collect();
+    let xs = rectangle([0.05, 0.3], 36, 4, q);
     sim.add_particles(slab, &xs, &vec![q * q; xs.len()], None)
         .unwrap();
     let xb = block([0.35, 0.8], 12, q);
@@ -243,14 +241,7 @@ fn a_rigid_plate_sliding_past_a_block_drags_it_only_with_friction() {
         sim.add_particles(body, &block([0.2, 0.2], 12, q), &[q * q; 144], None)
             .unwrap();
         // Two particles thick, from 0.1 to 0.9: it stands out of the block on both ends.
-        let xs: Vec<Vector<2>> = (0..2 * 32)
-            .map(|k| {
-                Vector::<2>::new(
-                    0.5 + ((k % 2) as f64 + 0.5) * q,
-                    0.1 + ((k / 2) as f64 + 0.5) * q,
-                )
-            })
-            .collect();
+        let xs = rectangle([0.5, 0.1], 2, 32, q);
         sim.add_particles(plate, &xs, &[q * q; 64], None).unwrap();
         let dt = sim.stable_dt(0.3).unwrap();
         while sim.time() < 0.2 {

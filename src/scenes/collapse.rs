@@ -185,21 +185,23 @@ impl GranularColumn {
         let mat = sim.add_material(Material::DruckerPrager(soil.with_rheology(self.rheology)));
         let q = h / 2.0;
         let (nx, ny) = (2 * self.cells_across, (h0 / q).round() as usize);
-        let x: Vec<Vector<2>> = (0..nx * ny)
-            .map(|k| Vector::<2>::new(((k % nx) as f64 + 0.5) * q, ((k / nx) as f64 + 0.5) * q))
-            .collect();
+        // Particles on a lattice of spacing q, `nx × ny` of them from `x0` along the floor.
+        let lattice = |x0: f64, nx: usize, ny: usize| -> Vec<Vector<2>> {
+            (0..nx * ny)
+                .map(|k| {
+                    let (i, j) = ((k % nx) as f64, (k / nx) as f64);
+                    Vector::<2>::new(x0 + (i + 0.5) * q, (j + 0.5) * q)
+                })
+                .collect()
+        };
+        let x = lattice(0.0, nx, ny);
         sim.add_particles(mat, &x, &vec![q * q; x.len()], None)?;
         if let Some(gate) = self.gate {
             sim.set_contact(Some(gate.friction))?;
             let plate = sim.add_material(Material::rigid(self.density, [0.0, gate.speed, 0.0])?);
             // Rows of q = h/2 up to GATE_CLEARANCE cells above the column.
             let rows = ny + 2 * GATE_CLEARANCE as usize;
-            let x: Vec<Vector<2>> = (0..2 * rows)
-                .map(|k| {
-                    let (i, j) = ((k % 2) as f64, (k / 2) as f64);
-                    Vector::<2>::new(self.width + (i + 0.5) * q, (j + 0.5) * q)
-                })
-                .collect();
+            let x = lattice(self.width, 2, rows);
             sim.add_particles(plate, &x, &vec![q * q; x.len()], None)?;
         }
         Ok(sim)
