@@ -4,7 +4,7 @@
 use crate::boundary::{Boundary, Side};
 use crate::error::Result;
 use crate::material::Material;
-use crate::shape::Shape;
+use crate::shape::{Shape, UniformRng};
 use crate::sim::{Integration, Sim, Transfer};
 use crate::{Matrix, Vector};
 use std::f64::consts::PI;
@@ -143,6 +143,73 @@ fn gauss_rule(n: usize) -> Result<(Vec<f64>, Vec<f64>)> {
     ))
 }
 
+/// Where the particles of a manufactured-solution run sit inside each cell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Placement {
+    /// The `ppc`-point Gauss–Legendre abscissae per direction, the Gauss weights as volumes: the
+    /// arrangement under which material-point integration is at its best.
+    Gauss,
+    /// The centres of `ppc` equal sub-cells per direction (the quarter points for `ppc = 2`),
+    /// equal volumes: regular, but off the Gauss points.
+    Uniform,
+    /// [`Placement::Uniform`] with every particle moved by a uniform random amount of up to
+    /// ±`fraction` of the particle spacing per direction (seeded, reproducible); equal volumes.
+    Jittered { fraction: f64, seed: u64 },
+}
+
+impl Placement {
+    /// The particles' reference positions and volumes on `cells` cells of size `h` per side,
+    /// `ppc` per cell per direction, cell by cell in lexicographic order.
+    pub fn particles<const D: usize>(
+        &self,
+        cells: usize,
+        ppc: usize,
+        h: f64,
+    ) -> Result<(Vec<Vector<D>>, Vec<f64>)> {
+        let (gx, gw) = match self {
+            Placement::Gauss => gauss_rule(ppc)?,
+            _ => {
+                gauss_rule(ppc)?; // the same range of ppc
+                let q = 1.0 / ppc as f64;
+                (
+                    (0..ppc).map(|i| (i as f64 + 0.5) * q).collect(),
+                    vec![q; ppc],
+                )
+            }
+        };
+        let mut rng = match *self {
+            Placement::Jittered { seed, .. } => Some(UniformRng::new(seed)),
+            _ => None,
+        };
+        let fraction = match *self {
+            Placement::Jittered { fraction, .. } => fraction,
+            _ => 0.0,
+        };
+        let n = ppc * cells;
+        let spacing = h / ppc as f64;
+        let mut x = Vec::with_capacity(n.pow(D as u32));
+        let mut vol = Vec::with_capacity(n.pow(D as u32));
+        for k in 0..n.pow(D as u32) {
+            let mut r = k;
+            let mut v = 1.0;
+            let mut site = Vector::<D>::from_fn(|_, _| {
+                let i = r % n;
+                r /= n;
+                v *= gw[i % ppc] * h;
+                ((i / ppc) as f64 + gx[i % ppc]) * h
+            });
+            if let Some(rng) = rng.as_mut() {
+                for a in 0..D {
+                    site[a] += (2.0 * rng.uniform() - 1.0) * fraction * spacing;
+                }
+            }
+            x.push(site);
+            vol.push(v);
+        }
+        Ok((x, vol))
+    }
+}
+
 /// [`run_mms`] with `ppc` particles per cell per direction at the Gauss–Legendre points of each
 /// cell, with the Gauss weights as volumes. With VC, the boundary points are the Gauss points of
 /// the box's faces ([`unit_box_boundary`]).
@@ -151,6 +218,45 @@ pub fn run_mms_with_particles<const D: usize>(
     mms: &AxisAlignedMms,
     cells: usize,
     ppc: usize,
+    shape: Shape,
+    integration: Integration,
+    transfer: Transfer,
+    t_end: f64,
+    cfl: f64,
+) -> Result<MmsRun> {
+    run_mms_placed::<D>(
+        mms,
+        cells,
+        ppc,
+        Placement::Gauss,
+        Surface::Exact,
+        shape,
+        integration,
+        transfer,
+        t_end,
+        cfl,
+    )
+}
+
+/// Where VC takes the body's surface from in a manufactured-solution run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Surface {
+    /// The box's faces at their Gauss points ([`unit_box_boundary`]): exact.
+    Exact,
+    /// None given: the step finds it from the particles ([`crate::integration::BoundaryPoints::of_particles`]),
+    /// as for a user who gives no boundary points.
+    Found,
+}
+
+/// [`run_mms_with_particles`] with the particles placed by `placement` and VC's surface from
+/// `surface`.
+#[allow(clippy::too_many_arguments)]
+pub fn run_mms_placed<const D: usize>(
+    mms: &AxisAlignedMms,
+    cells: usize,
+    ppc: usize,
+    placement: Placement,
+    surface: Surface,
     shape: Shape,
     integration: Integration,
     transfer: Transfer,
@@ -167,23 +273,9 @@ pub fn run_mms_with_particles<const D: usize>(
         sim.set_boundary(a, Side::High, Boundary::Slip)?;
     }
     let mat = sim.add_material(Material::neo_hookean(mms.density, mms.young, mms.poisson)?);
-    let (gx, gw) = gauss_rule(ppc)?;
-    let n = ppc * cells;
-    let mut x = Vec::with_capacity(n.pow(D as u32));
-    let mut vol = Vec::with_capacity(n.pow(D as u32));
-    for k in 0..n.pow(D as u32) {
-        let mut r = k;
-        let mut v = 1.0;
-        x.push(Vector::<D>::from_fn(|_, _| {
-            let i = r % n;
-            r /= n;
-            v *= gw[i % ppc] * h;
-            ((i / ppc) as f64 + gx[i % ppc]) * h
-        }));
-        vol.push(v);
-    }
+    let (x, vol) = placement.particles::<D>(cells, ppc, h)?;
     sim.add_particles(mat, &x, &vol, None)?;
-    if matches!(integration, Integration::Vc { .. }) {
+    if matches!(integration, Integration::Vc { .. }) && surface == Surface::Exact {
         let (bx, bn) = unit_box_boundary::<D>(cells, ppc)?;
         sim.add_boundary_points(&bx, &bn, None)?;
     }

@@ -354,8 +354,8 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         assert_eq!(rkmpm_sim_step(other, step_dt), RKMPM_OK);
         assert_eq!(rkmpm_sim_boundary_point_count(other, &mut nb), RKMPM_OK);
         assert_eq!(
-            nb, 16,
-            "surface of a 4×4 block, one point per particle face"
+            nb, 32,
+            "surface of a 4×4 block, one face per particle face, two Gauss points each"
         );
         rkmpm_sim_free(other);
 

@@ -143,18 +143,25 @@ impl<const D: usize> BoundaryPoints<D> {
     /// points, at every step), as a closed voxel surface. Each particle stands for its domain,
     /// the cell of side `s = (V⁰_p)^{1/D}` carried by its deformation gradient,
     /// `x_p + F_p [−s/2, s/2]^D`, taken a little larger (`SURFACE_DOMAIN_SCALE`) so that
-    /// neighbouring domains that do not quite meet still close. The voxels of side
-    /// `v = max_p (J_p V⁰_p)^{1/D} / 2` (aligned with `origin`) whose centres lie in some domain
-    /// and in the box `[origin, upper]` are the body; every voxel face between the body and an
-    /// empty voxel is a point at the face centre with the area normal `±e_a v^{D−1}`. The
-    /// normals of each piece sum to zero exactly, a body that breaks apart gets its new faces,
-    /// and no point drifts away from the material. A face of a voxel at the box's edge may lie
-    /// beyond it (a body against a wall or symmetry plane): its point goes onto the edge. On an
-    /// undeformed lattice whose particle faces fall on even voxel boundaries this is the surface
-    /// of [`BoundaryPoints::from_lattice`]: the `2^{D−1}` voxel faces of a particle face merge
-    /// into one point (faces merge by twos along each tangential axis, from even voxels).
+    /// neighbouring domains that do not quite meet still close. The voxels, aligned with
+    /// `origin`, have a side `v` that divides half a grid cell (`cell_size / 2`) and is at most
+    /// `max_p (J_p V⁰_p)^{1/D} / 2`; those whose centres lie in some domain and in the box
+    /// `[origin, upper]` are the body. Every voxel face between the body and an empty voxel is
+    /// a surface element: its `2^{D−1}` two-point Gauss points, each with its share of the area
+    /// normal `±e_a v^{D−1}`. No face straddles a knot of the shape functions (nodes and
+    /// half-cells), so `Σ_b Ψ_I n_b a_b` is the voxel surface's integral exactly for the
+    /// B-splines (VC makes the particle sums equal it; a face-centre rule, spaced at a phase
+    /// unrelated to the knots, carried a fixed fraction of error that did not shrink with h).
+    /// The normals of each piece sum to zero exactly, a body that breaks apart gets its new
+    /// faces, and no point drifts away from the material. A body against a wall has its faces
+    /// on the wall's plane (the voxels tile the grid's box, which a grid box of whole cells
+    /// is). When a half cell holds an even number of voxels, the `2^{D−1}` voxel faces of a
+    /// block `2g, 2g + 1` across (per tangential axis, inside one half cell) merge into one
+    /// face; on an undeformed lattice of two particles per cell per direction that is one face
+    /// per particle face.
     pub fn of_particles(
         (origin, upper): (&Vector<D>, &Vector<D>),
+        cell_size: f64,
         positions: &[Vector<D>],
         reference_volumes: &[f64],
         deformation_gradients: &[Matrix<D>],
@@ -172,10 +179,16 @@ impl<const D: usize> BoundaryPoints<D> {
                 (SURFACE_DOMAIN_SCALE * 0.5 * s, inverse, s * root(j.abs()))
             })
             .collect();
-        let v = 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
-        if !(v > 0.0 && v.is_finite()) {
+        let target = 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
+        if !(target > 0.0 && target.is_finite()) {
             return (Vec::new(), Vec::new());
         }
+        // `per_half` voxels per half cell, so that no voxel face straddles a knot of the shape
+        // functions (at the nodes and half-way between) and the voxels tile the grid's box.
+        let per_half = (0.5 * cell_size / target).ceil().clamp(1.0, 1e6);
+        let v = 0.5 * cell_size / per_half;
+        // Faces merge by twos only within a half cell.
+        let merge = (per_half as u64).is_multiple_of(2);
         // Voxel k spans [origin + k v, origin + (k + 1) v) per axis; its centre is at k + 1/2.
         // Only voxels whose centres lie in the domain `[origin, upper]` count, which also bounds
         // the work for a particle stretched far.
@@ -224,45 +237,63 @@ impl<const D: usize> BoundaryPoints<D> {
             }
         };
         let body = VoxelSet::of(&ranges, voxels_of);
-        // Faces merged by twos per tangential axis: the `2^{D−1}` faces of one side of a
-        // block of voxels `2g, 2g + 1` across (per tangential axis) become one point at their
-        // centre with their area when all are exposed; the member with even tangential indices
-        // stands for the group. On a lattice aligned with the voxels that is one point per
-        // particle face; the normals still sum to zero, and `x·(n a)` is unchanged (the faces
-        // of a group lie in one plane). The points keep the faces' fixed order.
+        // Faces merged by twos per tangential axis (when a half cell holds an even number of
+        // voxels): the `2^{D−1}` faces of one side of a block of voxels `2g, 2g + 1` across
+        // (per tangential axis) become one face with their area when all are exposed; the
+        // member with even tangential indices stands for the group. On a lattice aligned with
+        // the voxels that is one face per particle face; the normals still sum to zero. The
+        // points keep the faces' fixed order.
         let full = 1usize << (D - 1);
-        let unit = v.powi(D as i32 - 1);
         let exposed = |k: &[i64; D], a: usize, sign: i64| {
             let mut n = *k;
             n[a] += sign;
             body.contains(k) && !body.contains(&n)
         };
-        let point = |centre: [f64; D], a: usize, sign: i64, area: f64| {
-            let x =
-                Vector::<D>::from_fn(|b, _| (origin[b] + centre[b] * v).clamp(origin[b], upper[b]));
-            let mut e = Vector::<D>::zeros();
-            e[a] = sign as f64 * area;
-            (x, e)
+        // A face (centre in voxel units, side `width` voxels along each tangential axis) as its
+        // 2^{D−1} two-point Gauss points, each with its share of the area: exact for the
+        // polynomial pieces of the shape functions on the face.
+        let gauss = 0.5 / 3f64.sqrt();
+        let points = |centre: [f64; D], a: usize, sign: i64, width: f64| {
+            let area = (width * v).powi(D as i32 - 1) / full as f64;
+            (0..full).map(move |corner| {
+                let mut t = 0;
+                let x = Vector::<D>::from_fn(|b, _| {
+                    let mut c = centre[b];
+                    if b != a {
+                        c += if (corner >> t) & 1 == 0 {
+                            -gauss
+                        } else {
+                            gauss
+                        } * width;
+                        t += 1;
+                    }
+                    (origin[b] + c * v).clamp(origin[b], upper[b])
+                });
+                let mut e = Vector::<D>::zeros();
+                e[a] = sign as f64 * area;
+                (x, e)
+            })
         };
-        let points: Vec<(Vector<D>, Vector<D>)> = body
+        let found: Vec<Vec<(Vector<D>, Vector<D>)>> = body
             .exposed_faces()
             .into_par_iter()
             .filter_map(|(k, a, sign)| {
                 let normal = k[a] as f64 + 0.5 + 0.5 * sign as f64;
                 let first: [i64; D] =
                     std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) * 2 });
-                let grouped = (0..full).all(|m| {
-                    // Member m: bit t of m offsets the t-th tangential axis.
-                    let mut member = first;
-                    for (t, b) in (0..D).filter(|&b| b != a).enumerate() {
-                        member[b] += ((m >> t) & 1) as i64;
-                    }
-                    exposed(&member, a, sign)
-                });
+                let grouped = merge
+                    && (0..full).all(|m| {
+                        // Member m: bit t of m offsets the t-th tangential axis.
+                        let mut member = first;
+                        for (t, b) in (0..D).filter(|&b| b != a).enumerate() {
+                            member[b] += ((m >> t) & 1) as i64;
+                        }
+                        exposed(&member, a, sign)
+                    });
                 if !grouped {
                     let centre =
                         std::array::from_fn(|b| if b == a { normal } else { k[b] as f64 + 0.5 });
-                    Some(point(centre, a, sign, unit))
+                    Some(points(centre, a, sign, 1.0).collect())
                 } else if k == first {
                     // Centre of the block's side: 2g + 1 voxels along each tangential axis.
                     let centre = std::array::from_fn(|b| {
@@ -272,13 +303,13 @@ impl<const D: usize> BoundaryPoints<D> {
                             first[b] as f64 + 1.0
                         }
                     });
-                    Some(point(centre, a, sign, full as f64 * unit))
+                    Some(points(centre, a, sign, 2.0).collect())
                 } else {
                     None
                 }
             })
             .collect();
-        points.into_iter().unzip()
+        found.into_iter().flatten().unzip()
     }
 }
 
@@ -505,9 +536,11 @@ mod tests {
         x.iter().zip(na).map(|(x, n)| x.dot(n)).sum::<f64>() / D as f64
     }
 
-    /// On an undeformed lattice the surface found from the particles is the lattice surface of
-    /// [`BoundaryPoints::from_lattice`]: the same points with the same area normals (the four
-    /// voxel faces of each particle face merged into one), closed.
+    /// On an undeformed lattice of two particles per cell per direction the surface found from
+    /// the particles is the lattice surface of [`BoundaryPoints::from_lattice`] with each face
+    /// centre replaced by the face's four Gauss points (the four voxel faces of each particle
+    /// face merged into one): four times the points, the same closed surface, the same moments
+    /// `Σ n a` and `Σ x ⊗ n a`, every point on the box's faces.
     #[test]
     fn surface_of_an_undeformed_box_is_its_lattice_surface() {
         let (s, x) = (0.1, box_5_4_3());
@@ -515,30 +548,21 @@ mod tests {
         let f = vec![Matrix::<3>::identity(); x.len()];
         let (pts, normals) = BoundaryPoints::of_particles(
             (&Vector::zeros(), &Vector::from_element(1.0)),
+            2.0 * s,
             &x,
             &vol,
             &f,
         );
         let (lattice, lattice_normals) = BoundaryPoints::from_lattice(&x, &vol);
-        assert_eq!(pts.len(), lattice.len());
-        let sorted = |x: &[Vector<3>], n: &[Vector<3>]| {
-            let mut v: Vec<[f64; 6]> = x
-                .iter()
+        assert_eq!(pts.len(), 4 * lattice.len());
+        let moment = |x: &[Vector<3>], n: &[Vector<3>]| {
+            x.iter()
                 .zip(n)
-                .map(|(x, n)| [x[0], x[1], x[2], n[0], n[1], n[2]])
-                .collect();
-            v.sort_by(|a, b| a.partial_cmp(b).unwrap());
-            v
+                .map(|(x, n)| x * n.transpose())
+                .sum::<Matrix<3>>()
         };
-        for (a, b) in sorted(&pts, &normals)
-            .iter()
-            .zip(sorted(&lattice, &lattice_normals))
-        {
-            assert!(
-                a.iter().zip(b).all(|(p, q)| (p - q).abs() < 1e-14),
-                "{a:?} {b:?}"
-            );
-        }
+        let difference = moment(&pts, &normals) - moment(&lattice, &lattice_normals);
+        assert!(difference.norm() < 1e-14, "{difference}");
         let sum: Vector<3> = normals.iter().sum();
         assert!(sum.norm() < 1e-15);
         let area: f64 = normals.iter().map(|n| n.norm()).sum();
@@ -564,6 +588,7 @@ mod tests {
             let f = vec![Matrix::<2>::identity(); x.len()];
             BoundaryPoints::of_particles(
                 (&Vector::zeros(), &Vector::from_element(1.0)),
+                2.0 * s,
                 &x,
                 &vol,
                 &f,
@@ -578,8 +603,8 @@ mod tests {
             .iter()
             .zip(&na)
             .filter(|(x, n)| (x[1] - 0.35).abs() < 1e-12 && n[1] > 0.0);
-        // Four particles across: one merged point per particle face.
-        assert_eq!(top.count(), 4);
+        // Four particles across: one merged face per particle face, two Gauss points each.
+        assert_eq!(top.count(), 8);
         let (_, na) = surface(0.1 * s);
         let area: f64 = na.iter().map(|n| n.norm()).sum();
         assert!(area < 2.0 * (0.2 + 0.3) + 4.0 * s, "{area}");
@@ -598,6 +623,7 @@ mod tests {
         let vol = vec![s * s; x.len()];
         let (pts, na) = BoundaryPoints::of_particles(
             (&Vector::zeros(), &Vector::from_element(2.0)),
+            2.0 * s,
             &x,
             &vol,
             &vec![f; x.len()],
@@ -605,7 +631,7 @@ mod tests {
         assert!(na.iter().sum::<Vector<2>>().norm() < 1e-15);
         let j = f.determinant();
         let volume = j * 0.4 * 0.2;
-        // Voxels of half the current spacing (J s²)^(1/2).
+        // Voxels of at most half the current spacing (J s²)^(1/2).
         let v = 0.5 * s * j.sqrt();
         let perimeter = 2.0
             * ((f * Vector::<2>::new(0.4, 0.0)).norm() + (f * Vector::<2>::new(0.0, 0.2)).norm());
@@ -644,8 +670,13 @@ mod tests {
             .collect();
         let domain = (&Vector::<2>::zeros(), &Vector::<2>::from_element(1e4));
         let surface = |x: &[Vector<2>]| {
-            let (p, n) =
-                BoundaryPoints::of_particles(domain, x, &vec![s * s; x.len()], &vec![f; x.len()]);
+            let (p, n) = BoundaryPoints::of_particles(
+                domain,
+                2.0 * s,
+                x,
+                &vec![s * s; x.len()],
+                &vec![f; x.len()],
+            );
             let mut faces: Vec<[f64; 4]> = p
                 .iter()
                 .zip(&n)

@@ -1,17 +1,41 @@
-//! Variationally consistent (VC) integration (Chen, Hillman & Rüter 2013; METHOD.md section 3).
+//! Variationally consistent (VC) integration (Chen, Hillman & Rüter 2013; METHOD.md section 3),
+//! in a form that conserves linear momentum.
 //!
-//! Particles are the quadrature points. The test-function gradients are corrected per node so that
-//! the discrete divergence equality of order `n` holds: for every monomial `Q` of degree ≤ n − 1,
+//! Particles are the quadrature points. The test-function gradients are corrected so that the
+//! discrete divergence equality of order `n` holds at every node `I`: for every monomial `Q` of
+//! degree ≤ n − 1 (written in `(x − x_I)/h`),
 //!
 //! ```text
-//! Σ_p ∇̂Ψ_I Q V_p + Σ_p Ψ_I ∇Q V_p = Σ_b Ψ_I Q n_b a_b,     ∇̂Ψ_I = ∇Ψ_I + Σ_j ξ_Ij Q_j
+//! Σ_p ∇̂Ψ_I Q V_p + Σ_p Ψ_I ∇Q V_p = Σ_b Ψ_I Q n_b a_b
 //! ```
 //!
-//! which is, per node and direction, one small linear system with the moment matrix
-//! `A_I = Σ_p Q Qᵀ V_p` over the particles in the node's support. Order 1 is the seed's form
-//! (`Q = 1`): `ξ_I = (B_I − D_I) / W_I`. `Q` is written in `(x − x_I)/h` to keep `A_I`
-//! well conditioned. A node whose `A_I` is singular (too few particles in its support for the
-//! order) falls back to the order-1 correction.
+//! **Conservation.** The seed's per-node correction `∇̂Ψ_I = ∇Ψ_I + ξ_I` meets each node's
+//! equality on its own, but `Σ_I ∇̂Ψ_Ip = Σ_I ξ_I ≠ 0`: the internal forces no longer cancel
+//! and a free body pushes itself (0.1–1 % of `M v` in 1000 steps). Here the correction is
+//!
+//! ```text
+//! ∇̂Ψ_I(x_p) = ∇Ψ_I(x_p) + w_Ip (ζ_I·Q_I(x_p) − μ_p),   μ_p = Σ_J w_Jp ζ_J·Q_J(x_p) / Σ_J w_Jp
+//! ```
+//!
+//! with `w_Ip = |Ψ_I(x_p)|`, so `Σ_I w_Ip (ζ_I·Q_I − μ_p) = 0` at every particle whatever `ζ` is:
+//! the corrected gradients sum to zero (linear momentum is conserved to round-off), and a node
+//! at a body's edge, with a small mass, gets a correction as small as its weights (no force
+//! floor is needed). The equalities then couple the nodes through `μ_p`:
+//! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p`, `A_I = Σ_p V_p w_Ip Q Qᵀ`,
+//! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
+//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
+//! node blocks `A_I`, whose first iterate is the per-node correction. `K`'s null space is the
+//! corrections that change no gradient (a polynomial of degree < n over a whole body); the
+//! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
+//! body at order 1, zero for a closed surface. It is projected out per connected body before
+//! the solve (`Σ_b P n_b a_b − Σ_p V_p ∇P` for every polynomial P of degree < n: the surface
+//! and the particles disagreeing on P's divergence theorem). A node whose `A_I` is
+//! singular (too few particles in its support for the order) is preconditioned with its
+//! constant part only, and so corrected to order 1 ([`VcCorrection::reduced_to_first_order`]).
+//! A node that the particles barely reach while a surface point is near it has an equality the
+//! particles can meet only with a large correction on a node of almost no mass; the grid
+//! update's edge-mass floor limits its acceleration and hands the force it holds back to the
+//! whole field, so that momentum is still conserved (`crate::step::grid_update`).
 //!
 //! The corrected gradient is used in the internal force only (METHOD.md section 7).
 
@@ -32,6 +56,13 @@ use rayon::prelude::*;
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
 
+/// The conservative correction's solve stops when the preconditioned residual norm has fallen
+/// by this factor.
+pub const VC_SOLVE_TOLERANCE: f64 = 1e-12;
+
+/// At most this many conjugate-gradient iterations per step.
+pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
+
 /// Test polynomials at most (order 4 in 3D: the monomials of degree ≤ 3).
 const MAX_BASIS: usize = 20;
 
@@ -49,6 +80,10 @@ pub struct VcCorrection<const D: usize> {
     used: Vec<bool>,
     /// Slots whose moment matrix was singular, corrected to order 1 only.
     reduced: Vec<bool>,
+    /// Per particle: the mean `μ_p` of the node corrections over its support, per direction.
+    mean: Vec<Vector<D>>,
+    /// Conjugate-gradient iterations of the last solve.
+    iterations: usize,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -66,6 +101,8 @@ impl<const D: usize> VcCorrection<D> {
             xi: Vec::new(),
             used: Vec::new(),
             reduced: Vec::new(),
+            mean: Vec::new(),
+            iterations: 0,
         })
     }
 
@@ -181,9 +218,10 @@ impl<const D: usize> VcCorrection<D> {
                     // colour (`Bins`); slots of different nodes are disjoint ranges.
                     unsafe {
                         let a = moment.range(slot * m * m, m * m);
+                        let vw = v * s.value.abs();
                         for i in 0..m {
                             for j in 0..m {
-                                a[i * m + j] += v * q[i] * q[j];
+                                a[i * m + j] += vw * q[i] * q[j];
                             }
                         }
                         let r = xi.range(slot * m * D, m * D);
@@ -219,41 +257,303 @@ impl<const D: usize> VcCorrection<D> {
                 }
             }
         }
-        // Solve A_I ξ_Ik = rhs_Ik per node.
-        self.moment
+        self.solve_conserving(grid, bins, positions, volumes, stencils, nodes, body);
+    }
+
+    /// Solves for the node coefficients `ζ` of the momentum-conserving correction
+    /// `g_Ip = ζ_I·Q_I(x_p) − μ_p`, `μ_p` the mean of `ζ_J·Q_J(x_p)` over the nodes `J` of the
+    /// particle's support, so that `Σ_I g_Ip = 0` at every particle: the constraints
+    /// `Σ_p V_p g_Ip Q_I(x_p) = rhs_I` form the symmetric positive semi-definite system
+    /// `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p Q_I(x_p) μ_p`, solved by conjugate gradients
+    /// preconditioned with the node blocks `A_I` (the per-node correction is its first
+    /// iterate). `K` is singular along the corrections that change no particle's gradient
+    /// (a polynomial of degree < n over a whole body): the part of `rhs` along them is what no
+    /// force-free correction can meet (a surface whose quadrature disagrees with the particles'
+    /// divergence theorem), projected out first.
+    #[allow(clippy::too_many_arguments)]
+    fn solve_conserving(
+        &mut self,
+        grid: &Grid<D>,
+        bins: &Bins<D>,
+        positions: &[Vector<D>],
+        volumes: &[f64],
+        stencils: &Stencils<D>,
+        nodes: &GridNodes<D>,
+        body: Option<(&[u32], u32)>,
+    ) {
+        let m = self.m();
+        let slots = nodes.active.len();
+        let len = slots * m * D;
+        // The preconditioner: per node, A_I's Cholesky factor, or the constant part alone for
+        // a node whose moment matrix is singular (marked reduced) or of order 1.
+        let factors: Vec<Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>> = self
+            .moment
             .par_chunks_exact(m * m)
-            .zip(self.xi.par_chunks_exact_mut(m * D))
             .zip(self.used.par_iter())
             .zip(self.reduced.par_iter_mut())
-            .filter(|((_, &used), _)| used)
-            .for_each(|(((a, r), _), reduced)| {
+            .map(|((a, &used), reduced)| {
+                if !used || m == 1 {
+                    return None;
+                }
                 let a = DMatrix::from_row_slice(m, m, a);
-                // A moment matrix whose particles lie (nearly) on a lower-dimensional set cannot
-                // carry the higher constraints: relative smallest eigenvalue below
-                // [`VC_MIN_RELATIVE_EIGENVALUE`].
-                let well_posed = m > 1 && {
-                    let eig = a.clone().symmetric_eigenvalues();
-                    eig.min() > VC_MIN_RELATIVE_EIGENVALUE * eig.max()
-                };
-                let chol = if well_posed {
-                    a.clone().cholesky()
-                } else {
-                    None
-                };
-                *reduced = m > 1 && chol.is_none();
-                for k in 0..D {
-                    let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
-                    match &chol {
-                        Some(c) => r[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice()),
-                        None => {
-                            // Order 1, or a singular A_I: the constant correction alone.
-                            let c0 = rhs[0] / a[(0, 0)];
-                            r[k * m..(k + 1) * m].fill(0.0);
-                            r[k * m] = c0;
+                let eig = a.clone().symmetric_eigenvalues();
+                let chol = (eig.min() > VC_MIN_RELATIVE_EIGENVALUE * eig.max())
+                    .then(|| a.cholesky())
+                    .flatten();
+                *reduced = chol.is_none();
+                chol
+            })
+            .collect();
+        let moment = &self.moment;
+        let used = &self.used;
+        let precondition = |r: &[f64], z: &mut [f64]| {
+            z.par_chunks_exact_mut(m * D)
+                .zip(r.par_chunks_exact(m * D))
+                .enumerate()
+                .for_each(|(slot, (z, r))| {
+                    z.fill(0.0);
+                    if !used[slot] {
+                        return;
+                    }
+                    for k in 0..D {
+                        match &factors[slot] {
+                            Some(c) => {
+                                let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
+                                z[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice());
+                            }
+                            None => z[k * m] = r[k * m] / moment[slot * m * m],
                         }
                     }
+                });
+        };
+        // Per particle: how many nodes its support holds (the mean's divisor).
+        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
+        let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
+        let h = grid.cell_size;
+        let basis = &self.basis;
+        let q_of = |p: usize, n: usize, q: &mut [f64]| {
+            if m == 1 {
+                q[0] = 1.0;
+            } else {
+                let z = (positions[p] - grid.node_position(grid.node_multi_index(n))) / h;
+                basis.values(&z, &mut q[..m]);
+            }
+        };
+        let mut mean = std::mem::take(&mut self.mean);
+        mean.clear();
+        mean.resize(positions.len(), Vector::<D>::zeros());
+        // K ζ: the means of ζ at the particles, then the node sums.
+        let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
+            mean.par_iter_mut().enumerate().for_each(|(p, mu)| {
+                *mu = Vector::<D>::zeros();
+                if !counted(p) {
+                    return;
+                }
+                let mut q = [0.0; MAX_BASIS];
+                let mut weight = 0.0;
+                stencils.for_each(p, |_, s| {
+                    if !in_support(&s) {
+                        return;
+                    }
+                    let w = s.value.abs();
+                    weight += w;
+                    q_of(p, s.node, &mut q);
+                    let z = &zeta[nodes.slot(s.node) * m * D..];
+                    for k in 0..D {
+                        mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
+                    }
+                });
+                if weight > 0.0 {
+                    *mu /= weight;
                 }
             });
+            out.par_chunks_exact_mut(m * D)
+                .zip(zeta.par_chunks_exact(m * D))
+                .enumerate()
+                .for_each(|(slot, (o, z))| {
+                    let a = &moment[slot * m * m..(slot + 1) * m * m];
+                    for k in 0..D {
+                        for i in 0..m {
+                            o[k * m + i] = (0..m).map(|j| a[i * m + j] * z[k * m + j]).sum::<f64>();
+                        }
+                    }
+                });
+            let shared = SharedSlice::new(out);
+            let mean = &*mean;
+            for colour in &bins.colours {
+                colour.par_iter().for_each(|&b| {
+                    let mut q = [0.0; MAX_BASIS];
+                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
+                        let p = p as usize;
+                        if !counted(p) {
+                            continue;
+                        }
+                        let v = volumes[p];
+                        stencils.for_each(p, |_, s| {
+                            if !in_support(&s) {
+                                return;
+                            }
+                            let v = v * s.value.abs();
+                            q_of(p, s.node, &mut q);
+                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                            let o = unsafe { shared.range(nodes.slot(s.node) * m * D, m * D) };
+                            for k in 0..D {
+                                for j in 0..m {
+                                    o[k * m + j] -= v * q[j] * mean[p][k];
+                                }
+                            }
+                        });
+                    }
+                });
+            }
+        };
+        // Sums in fixed chunks, added in order: the same bits with any number of threads.
+        let dot = |a: &[f64], b: &[f64]| -> f64 {
+            let parts: Vec<f64> = a
+                .par_chunks(4096)
+                .zip(b.par_chunks(4096))
+                .map(|(a, b)| a.iter().zip(b).map(|(x, y)| x * y).sum())
+                .collect();
+            parts.iter().sum()
+        };
+        let mut rhs = std::mem::take(&mut self.xi);
+        // The part of the right-hand side along K's null space (per body, the nodes that
+        // particles connect: at order 1 the sum of its surface's area normals, zero for a closed
+        // surface up to round-off) is removed, so that the solve does not amplify it.
+        let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
+            if counted(p) {
+                stencils.for_each(p, |_, s| {
+                    if in_support(&s) {
+                        visit(nodes.slot(s.node));
+                    }
+                });
+            }
+        });
+        self.remove_null_part(grid, nodes, &body_of, &mut rhs);
+        // Started from zero (a start from the last step's coefficients would save iterations
+        // but tie the step to a history that a checkpoint does not hold), stopping when the
+        // preconditioned residual has fallen to `VC_SOLVE_TOLERANCE` of the right-hand side's.
+        let mut zeta = vec![0.0; len];
+        let mut r = rhs.clone();
+        let mut z = vec![0.0; len];
+        precondition(&r, &mut z);
+        let mut d = z.clone();
+        let mut kd = vec![0.0; len];
+        let mut rz = dot(&r, &z);
+        let target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * rz;
+        let mut iterations = 0;
+        while rz > target && iterations < VC_SOLVE_MAX_ITERATIONS {
+            apply(&d, &mut kd, &mut mean);
+            let dkd = dot(&d, &kd);
+            if dkd <= 0.0 {
+                break;
+            }
+            let alpha = rz / dkd;
+            zeta.par_iter_mut()
+                .zip(&d)
+                .for_each(|(x, d)| *x += alpha * d);
+            r.par_iter_mut()
+                .zip(&kd)
+                .for_each(|(r, kd)| *r -= alpha * kd);
+            precondition(&r, &mut z);
+            let rz_new = dot(&r, &z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            d.par_iter_mut()
+                .zip(&z)
+                .for_each(|(d, z)| *d = z + beta * *d);
+            iterations += 1;
+        }
+        self.iterations = iterations;
+        // The particle means of the solution, which the corrected gradients subtract.
+        apply(&zeta, &mut kd, &mut mean);
+        self.mean = mean;
+        self.xi = zeta;
+    }
+
+    /// Removes from `rhs` (per slot, `m` values per direction) its projection onto `K`'s null
+    /// space: per body, the node coefficients of every global polynomial `P` of degree < n,
+    /// re-expanded about each node, `P(x_c + h (d_I + z)) = Σ_e N_Ie z^e`, `d_I = (x_I − x_c)/h`
+    /// about the body's node centroid `x_c` (binomial coefficients).
+    fn remove_null_part(
+        &self,
+        grid: &Grid<D>,
+        nodes: &GridNodes<D>,
+        body_of: &[usize],
+        rhs: &mut [f64],
+    ) {
+        let m = self.m();
+        let exps = self.basis.exponents();
+        let bodies = body_of.iter().map(|&b| b + 1).max().unwrap_or(0);
+        let h = grid.cell_size;
+        let position = |slot: usize| grid.node_position(grid.node_multi_index(nodes.active[slot]));
+        let mut centroid = vec![(0.0, Vector::<D>::zeros()); bodies];
+        for (slot, &b) in body_of.iter().enumerate() {
+            if self.used[slot] {
+                centroid[b].0 += 1.0;
+                centroid[b].1 += position(slot);
+            }
+        }
+        let binomial = |n: u32, k: u32| -> f64 {
+            (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
+        };
+        // N_I[e][f]: coefficient of z^e in the re-expansion of the monomial f.
+        let null_at = |slot: usize, out: &mut [f64]| {
+            let b = body_of[slot];
+            let d = (position(slot) - centroid[b].1 / centroid[b].0) / h;
+            for (e, ee) in exps.iter().enumerate() {
+                for (f, ff) in exps.iter().enumerate() {
+                    out[e * m + f] = if (0..D).all(|a| ee[a] <= ff[a]) {
+                        (0..D)
+                            .map(|a| binomial(ff[a], ee[a]) * d[a].powi((ff[a] - ee[a]) as i32))
+                            .product()
+                    } else {
+                        0.0
+                    };
+                }
+            }
+        };
+        // Per body: G = Σ_I N_Iᵀ N_I and t_k = Σ_I N_Iᵀ r_Ik.
+        let mut gram = vec![DMatrix::<f64>::zeros(m, m); bodies];
+        let mut t = vec![DMatrix::<f64>::zeros(m, D); bodies];
+        let mut n = vec![0.0; m * m];
+        for (slot, &b) in body_of.iter().enumerate() {
+            if !self.used[slot] {
+                continue;
+            }
+            null_at(slot, &mut n);
+            let r = &rhs[slot * m * D..(slot + 1) * m * D];
+            for f in 0..m {
+                for g in 0..m {
+                    gram[b][(f, g)] += (0..m).map(|e| n[e * m + f] * n[e * m + g]).sum::<f64>();
+                }
+                for k in 0..D {
+                    t[b][(f, k)] += (0..m).map(|e| n[e * m + f] * r[k * m + e]).sum::<f64>();
+                }
+            }
+        }
+        let alpha: Vec<Option<DMatrix<f64>>> = gram
+            .into_iter()
+            .zip(t)
+            .map(|(g, t)| g.cholesky().map(|c| c.solve(&t)))
+            .collect();
+        for (slot, &b) in body_of.iter().enumerate() {
+            let Some(alpha) = alpha[b].as_ref().filter(|_| self.used[slot]) else {
+                continue;
+            };
+            null_at(slot, &mut n);
+            let r = &mut rhs[slot * m * D..(slot + 1) * m * D];
+            for k in 0..D {
+                for e in 0..m {
+                    r[k * m + e] -= (0..m).map(|f| n[e * m + f] * alpha[(f, k)]).sum::<f64>();
+                }
+            }
+        }
+    }
+
+    /// Conjugate-gradient iterations of the last [`VcCorrection::compute`].
+    pub fn iterations(&self) -> usize {
+        self.iterations
     }
 
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.
@@ -261,16 +561,19 @@ impl<const D: usize> VcCorrection<D> {
         self.reduced.get(nodes.slot(n)).copied().unwrap_or(false)
     }
 
-    /// The correction `Σ_j ξ_Ij Q_j(x)` to add to `∇Ψ_I(x)` for the node `n` (already active).
+    /// The correction `ζ_I·Q_I(x_p) − μ_p` to add to `∇Ψ_I(x_p)` for the node `n` (already
+    /// active, in the support of particle `p` at `x`).
     #[inline]
     pub fn gradient_correction(
         &self,
         grid: &Grid<D>,
         nodes: &GridNodes<D>,
         n: usize,
+        p: usize,
         x: &Vector<D>,
+        weight: f64,
     ) -> Vector<D> {
-        self.gradient_correction_at(grid, nodes.slot(n) as u32, n, x)
+        self.gradient_correction_at(grid, nodes.slot(n) as u32, n, p, x, weight)
     }
 
     /// [`VcCorrection::gradient_correction`] for the node `n` listed at `slot`.
@@ -280,19 +583,63 @@ impl<const D: usize> VcCorrection<D> {
         grid: &Grid<D>,
         slot: u32,
         n: usize,
+        p: usize,
         x: &Vector<D>,
+        weight: f64,
     ) -> Vector<D> {
         let m = self.m();
         let slot = slot as usize;
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
         if m == 1 {
-            return Vector::<D>::from_fn(|k, _| r[k]);
+            return (Vector::<D>::from_fn(|k, _| r[k]) - self.mean[p]) * weight.abs();
         }
-        let mut q = [0.0; 64];
+        let mut q = [0.0; MAX_BASIS];
         let z = (x - grid.node_position(grid.node_multi_index(n))) / grid.cell_size;
         self.basis_at(&z, &mut q[..m], None);
-        Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum())
+        (Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum()) - self.mean[p])
+            * weight.abs()
     }
+}
+
+/// The connected bodies of the nodes (slots) that particles join: `stencil(p, visit)` visits
+/// the slots of particle `p`'s support. Returns a body number per slot, numbered from 0.
+fn bodies(
+    slots: usize,
+    particles: usize,
+    stencil: impl Fn(usize, &mut dyn FnMut(usize)),
+) -> Vec<usize> {
+    let mut parent: Vec<usize> = (0..slots).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for p in 0..particles {
+        let mut first = None;
+        stencil(p, &mut |slot| match first {
+            None => first = Some(root(&mut parent, slot)),
+            Some(f) => {
+                let r = root(&mut parent, slot);
+                if r != f {
+                    parent[r] = f;
+                }
+            }
+        });
+    }
+    let mut number = vec![usize::MAX; slots];
+    let mut next = 0;
+    (0..slots)
+        .map(|i| {
+            let r = root(&mut parent, i);
+            if number[r] == usize::MAX {
+                number[r] = next;
+                next += 1;
+            }
+            number[r]
+        })
+        .collect()
 }
 
 #[cfg(test)]

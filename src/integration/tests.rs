@@ -86,7 +86,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
             work.nodes.touch(n);
             let mut g = gs[s];
             if let Some(vc) = &vc {
-                g += vc.gradient_correction(&grid, &work.nodes, n, &ps.position[p]);
+                g += vc.gradient_correction(&grid, &work.nodes, n, p, &ps.position[p], ws[s]);
             }
             let z = (ps.position[p] - grid.node_position(grid.node_multi_index(n))) / h;
             q_basis.basis_at(&z, &mut q, Some(&mut dq));
@@ -155,8 +155,9 @@ fn first_order_divergence_equality() {
             divergence_residual(&mut s2, Some(1), 1),
             divergence_residual(&mut s2, None, 1),
         );
-        // Sums of V ∇Ψ ~ h^{D-1} = 0.1: round-off ~1e-17.
-        assert!(with < 1e-14, "{shape:?} 2D: residual with VC {with:e}");
+        // Sums of V ∇Ψ ~ h^{D-1} = 0.1, met by an iterative solve to 1e-12 of the right-hand
+        // side's preconditioned norm: 1e-13.
+        assert!(with < 1e-13, "{shape:?} 2D: residual with VC {with:e}");
         assert!(
             without > 1e-5,
             "{shape:?} 2D: residual without VC {without:e}"
@@ -166,7 +167,7 @@ fn first_order_divergence_equality() {
             divergence_residual(&mut s3, Some(1), 1),
             divergence_residual(&mut s3, None, 1),
         );
-        assert!(with < 1e-15, "{shape:?} 3D: residual with VC {with:e}");
+        assert!(with < 1e-14, "{shape:?} 3D: residual with VC {with:e}");
         assert!(
             without > 1e-6,
             "{shape:?} 3D: residual without VC {without:e}"
@@ -176,8 +177,9 @@ fn first_order_divergence_equality() {
 
 /// Order-2 VC satisfies the order-2 constraints (Q = 1, x, y[, z]) to round-off; order 1 does
 /// not. Nodes whose support holds too few particles for a 3×3 (4×4) moment matrix (the body's
-/// corners) fall back to order 1 and are left out. The moment solve has condition numbers up to
-/// ~1e3, so round-off is allowed to 1e-13 on sums of size 0.1.
+/// corners) fall back to order 1 and are left out. The conservative solve stops at 1e-12 of the
+/// right-hand side's preconditioned norm (`VC_SOLVE_TOLERANCE`) with node blocks of condition
+/// numbers up to ~1e3, so 1e-12 on sums of size 0.1.
 #[test]
 fn second_order_divergence_equality() {
     for shape in [
@@ -191,7 +193,7 @@ fn second_order_divergence_equality() {
         let with = divergence_residual(&mut s2, Some(2), 2);
         let first = divergence_residual(&mut s2, Some(1), 2);
         assert!(
-            with < 1e-13,
+            with < 1e-12,
             "{shape:?} 2D: order-2 residual with VC2 {with:e}"
         );
         assert!(
@@ -201,7 +203,7 @@ fn second_order_divergence_equality() {
         let mut s3 = jittered_box::<3>(shape, Some(2), 0.4);
         let with = divergence_residual(&mut s3, Some(2), 2);
         assert!(
-            with < 1e-13,
+            with < 1e-12,
             "{shape:?} 3D: order-2 residual with VC2 {with:e}"
         );
     }

@@ -5,14 +5,16 @@ use crate::grid::{Grid, GridNodes, LumpingShift, SharedSlice};
 use crate::Vector;
 use rayon::prelude::*;
 
-/// Signed shape functions and VC integration: the smallest node mass, as a fraction of the
-/// largest node mass, that a node's internal force is divided by. Nodes that barely overlap a
-/// body have a tiny lumped mass but not a tiny (VC-corrected) force; without this limit, an
-/// RK2 + VC2 column under its own weight at 32 cells lets the velocities above its free surface
-/// grow until a boundary point inverts (t ≈ 1.2 s), and a quadratic B-spline + VC block with a
-/// smooth small-strain velocity field stops at step 74 (2D) or 77 (3D) with an inverted boundary
-/// point (found by the throughput benchmark). The body force is kept apart and not limited, so a
-/// uniform gravity stays exact.
+/// Signed shape functions: the smallest node mass, as a fraction of the largest node mass, that
+/// a node's internal force is divided by. Nodes that barely overlap a body have a tiny lumped
+/// mass but not a tiny force; without this limit, an RK2 + VC2 column under its own weight at
+/// 32 cells lets the velocities above its free surface grow until a boundary point inverts
+/// (t ≈ 1.2 s). The body force is kept apart and not limited, so a uniform gravity stays exact.
+/// VC: a node that the particles barely reach while a surface point is near it gets the
+/// correction its divergence equality asks for, large against its mass; without this limit a
+/// quadratic B-spline + VC block with a smooth small-strain velocity field stopped at step 74
+/// (2D) or 77 (3D) with an inverted boundary point. The force held back is handed to the whole
+/// field as one mass-weighted acceleration (without walls), so momentum is conserved.
 const EDGE_MASS_FRACTION: f64 = 1e-2;
 
 /// Updates the velocities of the active nodes.
@@ -42,9 +44,8 @@ pub fn grid_update<const D: usize>(
 ) {
     walls.fold(grid, nodes, dt.is_some());
     // Signed shape functions: nodes at the edge of a body have a tiny mass but not a tiny
-    // (VC-corrected) force; their acceleration is taken against at least a fraction of the
-    // largest node mass (see [`EDGE_MASS_FRACTION`]).
-    // The limit is on exactly when the body force is kept apart (signed shapes and VC).
+    // force; their acceleration is taken against at least a fraction of the largest node mass
+    // (see [`EDGE_MASS_FRACTION`]). The limit is on exactly when the body force is kept apart.
     let force_mass_floor = match (!nodes.body_force.is_empty(), dt) {
         (true, Some(_)) => {
             EDGE_MASS_FRACTION
@@ -115,6 +116,38 @@ pub fn grid_update<const D: usize>(
             None => *v = *p / *m,
         }
     });
+    // The force the edge-mass floor held back, handed to the whole field as one acceleration
+    // (mass-weighted), so that the field's momentum still changes by Σ f Δt; with walls, which
+    // take momentum anyway and must not be pushed through, it is dropped. Sums in node order:
+    // the same bits with any number of threads.
+    if let (Some(dt), true) = (dt, force_mass_floor > 0.0 && !walls.any_wall()) {
+        let (mut held, mut total) = (Vector::<D>::zeros(), 0.0);
+        for &n in &nodes.active {
+            let m = nodes.mass[n];
+            if m > mass_floor {
+                total += m;
+                if m < force_mass_floor {
+                    held += nodes.force[n] * (1.0 - m / force_mass_floor);
+                }
+            }
+        }
+        if total > 0.0 && held != Vector::<D>::zeros() {
+            let dv = held * (dt / total);
+            let GridNodes {
+                mass,
+                velocity,
+                active,
+                ..
+            } = nodes;
+            let velocity = SharedSlice::new(velocity);
+            active.par_iter().for_each(|&n| {
+                if mass[n] > mass_floor {
+                    // SAFETY: `active` lists each node once.
+                    unsafe { *velocity.at(n) += dv };
+                }
+            });
+        }
+    }
     walls.apply_friction(grid, nodes);
     walls.unfold(grid, nodes);
 }

@@ -326,8 +326,8 @@ impl<const D: usize> Sim<D> {
         let grid = &self.grid;
         let work = &mut self.work;
         let signed = self.shape.is_signed();
-        // Signed shapes and VC keep the body force apart so that edge nodes' internal force can
-        // be limited (grid_update).
+        // Signed shapes and VC keep the body force apart so that edge nodes' internal force
+        // can be limited (grid_update).
         work.nodes
             .ensure(grid, signed, false, signed || self.vc.is_some())?;
         if self.options.contact.is_some() {
@@ -492,9 +492,15 @@ impl<const D: usize> Sim<D> {
                 .filter(|_| plan.mls)
                 .map(|inverse_inertia| (dt, inverse_inertia)),
         };
-        // Nodes at or below this mass get no velocity: a fraction of the largest particle mass,
-        // which particle to grid returns.
-        let floor_of = |largest_mass: f64| 1e-10 * largest_mass;
+        // Nodes at or below this mass get no velocity. Signed shape functions and linear hats:
+        // a fraction of the largest particle mass (which particle to grid returns), since their
+        // node masses may be tiny where the force or the velocity gradient is not. The smooth
+        // nonnegative ones (B-splines, RK1): only empty nodes, so that no node's momentum or
+        // force is dropped and a free body's momentum is kept to round-off (with the floor a
+        // cubic B-spline block drifted by 1e-10 of M·v in 1000 steps).
+        let floored =
+            self.shape.is_signed() || matches!(self.options.shape, crate::shape::Shape::Linear);
+        let floor_of = move |largest_mass: f64| if floored { 1e-10 * largest_mass } else { 0.0 };
         let mut mass_floor = 0.0;
         // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
         let mut body_surfaces = BoundaryPoints::default();
@@ -997,6 +1003,7 @@ fn found_surface<const D: usize>(
     let (x, na) = match body {
         None => BoundaryPoints::of_particles(
             box_,
+            grid.cell_size,
             &ps.position,
             &ps.reference_volume,
             &ps.deformation_gradient,
@@ -1005,6 +1012,7 @@ fn found_surface<const D: usize>(
             let members: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == body).collect();
             BoundaryPoints::of_particles(
                 box_,
+                grid.cell_size,
                 &gather(&ps.position, &members),
                 &gather(&ps.reference_volume, &members),
                 &gather(&ps.deformation_gradient, &members),

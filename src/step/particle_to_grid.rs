@@ -149,8 +149,10 @@ where
                     }
                     if let Some((vs, b)) = force {
                         let grad = match vc {
-                            Some(vc) => g + vc.gradient_correction_at(grid, out.slot[n], n, &xp),
-                            None => g,
+                            Some(vc) if w != 0.0 || g != Vector::<D>::zeros() => {
+                                g + vc.gradient_correction_at(grid, out.slot[n], n, p, &xp, w)
+                            }
+                            _ => g,
                         };
                         scatter_add(out.force, n, vs * grad);
                         if !with_body_force {
