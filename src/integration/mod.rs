@@ -58,10 +58,10 @@ pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
 
 /// The conservative correction's solve stops when the preconditioned residual norm has fallen
 /// by this factor.
-pub const VC_SOLVE_TOLERANCE: f64 = 1e-12;
+pub(crate) const VC_SOLVE_TOLERANCE: f64 = 1e-12;
 
 /// At most this many conjugate-gradient iterations per step.
-pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
+pub(crate) const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
 
 /// Test polynomials at most (order 4 in 3D: the monomials of degree ≤ 3).
 const MAX_BASIS: usize = 20;
