@@ -443,7 +443,7 @@ impl<const D: usize> VcCorrection<D> {
         // The preconditioner: the node blocks plus, at order 1, the coarse levels' correction,
         // additively (`multilevel`): iterations that do not grow with the grid. (At order ≥ 2
         // the same coarse spaces let the iterations stall now and then: the node blocks alone.)
-        let coarse = (m == 1 && std::env::var("RKMPM_VC_COARSE").map_or(true, |v| v != "0")).then(|| {
+        let coarse = (m == 1).then(|| {
             Multilevel::new(
                 grid,
                 nodes,
