@@ -24,11 +24,7 @@
 //! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p`, `A_I = Σ_p V_p w_Ip Q Qᵀ`,
 //! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
 //! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
-//! node blocks `A_I` (alone, they make the per-node correction the first iterate) plus a
-//! multilevel coarse correction on every second node, level by level (`multilevel`), so that
-//! the iterations do not grow with the grid (22 at 32 and at 64 cells for the cubic B-spline
-//! with VC1 on the manufactured solution, against 76 and 135 with the node blocks alone).
-//! `K`'s null space is the
+//! node blocks `A_I`, whose first iterate is the per-node correction. `K`'s null space is the
 //! corrections that change no gradient (a polynomial of degree < n over a whole body); the
 //! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
 //! body at order 1, zero for a closed surface. It is projected out per connected body before
@@ -37,23 +33,13 @@
 //! singular (too few particles in its support for the order) is preconditioned with its
 //! constant part only, and so corrected to order 1 ([`VcCorrection::reduced_to_first_order`]).
 //! A node that the particles barely reach while a surface point is near it has an equality the
-//! particles can meet only with a large correction on a node of almost no mass. Where its
-//! particle sum `Σ_p V_p |Ψ_I|` is at most `VC_MIN_RELATIVE_SUPPORT` (1e-10) of the largest
-//! node's, it gets no correction and takes no part in its particles' means (their corrections
-//! still sum to zero over the nodes that have one). Two RK1 + VC1 disks that collide and part
-//! (the default scene, 600 steps) move their momentum by 8e-4 of `Σ m|v|` when every node is
-//! corrected (nodes whose `Ψ` is zero at every particle while its gradient is not), 4e-10 with
-//! only those left out, 3e-13 with the threshold at 1e-12, 4e-14 at 1e-10 and 1e-8; at 1e-6 two
-//! corner nodes of a jittered 3D box are left out and its patch test fails (4e-8 m/s). Above
-//! the threshold, the grid update's edge-mass floor (signed shape functions) limits such a
-//! node's acceleration and hands the force it holds back to the whole field, so that momentum
-//! is still conserved
-//! (`crate::step::grid_update`).
+//! particles can meet only with a large correction on a node of almost no mass; the grid
+//! update's edge-mass floor limits its acceleration and hands the force it holds back to the
+//! whole field, so that momentum is still conserved (`crate::step::grid_update`).
 //!
 //! The corrected gradient is used in the internal force only (METHOD.md section 7).
 
 pub mod boundary_points;
-mod multilevel;
 
 pub use boundary_points::BoundaryPoints;
 
@@ -62,7 +48,6 @@ use crate::grid::{Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, StencilNode, StencilView, Stencils};
 use crate::step::Bins;
 use crate::Vector;
-use multilevel::Multilevel;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -70,10 +55,6 @@ use rayon::prelude::*;
 /// conditioned; below this smallest-to-largest eigenvalue ratio (a node whose support holds only
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
-
-/// A node whose particle sum `Σ_p V_p |Ψ_I|` is at most this fraction of the largest node's
-/// gets no correction and takes no part in its particles' means.
-pub(crate) const VC_MIN_RELATIVE_SUPPORT: f64 = 1e-10;
 
 /// The conservative correction's solve stops when the preconditioned residual norm has fallen
 /// by this factor.
@@ -255,17 +236,6 @@ impl<const D: usize> VcCorrection<D> {
                 });
             });
         }
-        // Nodes that the particles barely reach (`Σ_p V_p |Ψ_I|` a vanishing fraction of the
-        // largest) are left uncorrected: their equality could only be met by a correction that
-        // grows as the inverse of that sum, on a node of no mass.
-        let largest = (0..slots)
-            .map(|slot| self.moment[slot * m * m])
-            .fold(0.0, f64::max);
-        for (slot, used) in self.used.iter_mut().enumerate() {
-            if self.moment[slot * m * m] <= VC_MIN_RELATIVE_SUPPORT * largest {
-                *used = false;
-            }
-        }
         // Boundary sums: rhs_Ik += Ψ_I Q (n a)_k, only at nodes whose support meets a point.
         let mut q = [0.0; MAX_BASIS];
         for b in 0..boundary.len() {
@@ -287,7 +257,7 @@ impl<const D: usize> VcCorrection<D> {
                 }
             }
         }
-        self.solve_conserving(grid, positions, volumes, stencils, nodes, body);
+        self.solve_conserving(grid, bins, positions, volumes, stencils, nodes, body);
     }
 
     /// Solves for the node coefficients `ζ` of the momentum-conserving correction
@@ -295,8 +265,8 @@ impl<const D: usize> VcCorrection<D> {
     /// particle's support, so that `Σ_I g_Ip = 0` at every particle: the constraints
     /// `Σ_p V_p g_Ip Q_I(x_p) = rhs_I` form the symmetric positive semi-definite system
     /// `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p Q_I(x_p) μ_p`, solved by conjugate gradients
-    /// preconditioned with the node blocks `A_I` plus a multilevel coarse correction
-    /// ([`multilevel`]). `K` is singular along the corrections that change no particle's gradient
+    /// preconditioned with the node blocks `A_I` (the per-node correction is its first
+    /// iterate). `K` is singular along the corrections that change no particle's gradient
     /// (a polynomial of degree < n over a whole body): the part of `rhs` along them is what no
     /// force-free correction can meet (a surface whose quadrature disagrees with the particles'
     /// divergence theorem), projected out first.
@@ -304,6 +274,7 @@ impl<const D: usize> VcCorrection<D> {
     fn solve_conserving(
         &mut self,
         grid: &Grid<D>,
+        bins: &Bins<D>,
         positions: &[Vector<D>],
         volumes: &[f64],
         stencils: &Stencils<D>,
@@ -355,61 +326,47 @@ impl<const D: usize> VcCorrection<D> {
                     }
                 });
         };
+        // Per particle: how many nodes its support holds (the mean's divisor).
+        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
         let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
-        // The pairs of particles and the nodes they correct: a node without a correction of its
-        // own (`uncorrected`) takes no part, neither in its particles' means nor in their sums.
-        let pairs = Pairs::new(slots, volumes, |p, visit| {
-            if counted(p) {
-                stencils.for_each(p, |_, s| {
-                    if s.value != 0.0 || s.gradient != Vector::<D>::zeros() {
-                        let slot = nodes.slot(s.node);
-                        if used[slot] {
-                            visit(slot, s.value.abs());
-                        }
-                    }
-                });
-            }
-        });
         let h = grid.cell_size;
         let basis = &self.basis;
-        let node_x: Vec<Vector<D>> = nodes
-            .active
-            .par_iter()
-            .map(|&n| grid.node_position(grid.node_multi_index(n)))
-            .collect();
-        let q_of = |p: usize, slot: usize, q: &mut [f64]| {
+        let q_of = |p: usize, n: usize, q: &mut [f64]| {
             if m == 1 {
                 q[0] = 1.0;
             } else {
-                basis.values(&((positions[p] - node_x[slot]) / h), &mut q[..m]);
+                let z = (positions[p] - grid.node_position(grid.node_multi_index(n))) / h;
+                basis.values(&z, &mut q[..m]);
             }
         };
         let mut mean = std::mem::take(&mut self.mean);
         mean.clear();
         mean.resize(positions.len(), Vector::<D>::zeros());
-        // K ζ: the means of ζ at the particles, then per node its own block and its particles'
-        // means (gathered, so that every node's sum runs in one fixed order).
+        // K ζ: the means of ζ at the particles, then the node sums.
         let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
             mean.par_iter_mut().enumerate().for_each(|(p, mu)| {
                 *mu = Vector::<D>::zeros();
-                if m == 1 {
-                    for i in pairs.of_particle(p) {
-                        let z = &zeta[pairs.slot[i] as usize * D..][..D];
-                        *mu += Vector::<D>::from_fn(|k, _| z[k]) * pairs.share[i];
-                    }
+                if !counted(p) {
                     return;
                 }
                 let mut q = [0.0; MAX_BASIS];
-                for i in pairs.of_particle(p) {
-                    let (slot, w) = (pairs.slot[i] as usize, pairs.share[i]);
-                    q_of(p, slot, &mut q);
-                    let z = &zeta[slot * m * D..];
+                let mut weight = 0.0;
+                stencils.for_each(p, |_, s| {
+                    if !in_support(&s) {
+                        return;
+                    }
+                    let w = s.value.abs();
+                    weight += w;
+                    q_of(p, s.node, &mut q);
+                    let z = &zeta[nodes.slot(s.node) * m * D..];
                     for k in 0..D {
                         mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
                     }
+                });
+                if weight > 0.0 {
+                    *mu /= weight;
                 }
             });
-            let mean = &*mean;
             out.par_chunks_exact_mut(m * D)
                 .zip(zeta.par_chunks_exact(m * D))
                 .enumerate()
@@ -420,34 +377,35 @@ impl<const D: usize> VcCorrection<D> {
                             o[k * m + i] = (0..m).map(|j| a[i * m + j] * z[k * m + j]).sum::<f64>();
                         }
                     }
+                });
+            let shared = SharedSlice::new(out);
+            let mean = &*mean;
+            for colour in &bins.colours {
+                colour.par_iter().for_each(|&b| {
                     let mut q = [0.0; MAX_BASIS];
-                    let range = pairs.node_start[slot]..pairs.node_start[slot + 1];
-                    if m == 1 {
-                        let mut sum = Vector::<D>::zeros();
-                        for (&p, &v) in pairs.node_particle[range.clone()]
-                            .iter()
-                            .zip(&pairs.node_weight[range])
-                        {
-                            sum += mean[p as usize] * v;
-                        }
-                        for k in 0..D {
-                            o[k] -= sum[k];
-                        }
-                        return;
-                    }
-                    for (&p, &v) in pairs.node_particle[range.clone()]
-                        .iter()
-                        .zip(&pairs.node_weight[range])
-                    {
+                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
                         let p = p as usize;
-                        q_of(p, slot, &mut q);
-                        for k in 0..D {
-                            for j in 0..m {
-                                o[k * m + j] -= v * q[j] * mean[p][k];
-                            }
+                        if !counted(p) {
+                            continue;
                         }
+                        let v = volumes[p];
+                        stencils.for_each(p, |_, s| {
+                            if !in_support(&s) {
+                                return;
+                            }
+                            let v = v * s.value.abs();
+                            q_of(p, s.node, &mut q);
+                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                            let o = unsafe { shared.range(nodes.slot(s.node) * m * D, m * D) };
+                            for k in 0..D {
+                                for j in 0..m {
+                                    o[k * m + j] -= v * q[j] * mean[p][k];
+                                }
+                            }
+                        });
                     }
                 });
+            }
         };
         // Sums in fixed chunks, added in order: the same bits with any number of threads.
         let dot = |a: &[f64], b: &[f64]| -> f64 {
@@ -463,38 +421,15 @@ impl<const D: usize> VcCorrection<D> {
         // particles connect: at order 1 the sum of its surface's area normals, zero for a closed
         // surface up to round-off) is removed, so that the solve does not amplify it.
         let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
-            for i in pairs.of_particle(p) {
-                visit(pairs.slot[i] as usize);
+            if counted(p) {
+                stencils.for_each(p, |_, s| {
+                    if in_support(&s) {
+                        visit(nodes.slot(s.node));
+                    }
+                });
             }
         });
-        let null = self.null_space(grid, nodes, &body_of);
-        null.project(&mut rhs);
-        // The preconditioner: the node blocks plus, at order 1, the coarse levels' correction,
-        // additively (`multilevel`): iterations that do not grow with the grid. (At order ≥ 2
-        // the same coarse spaces let the iterations stall now and then: the node blocks alone.)
-        let coarse = (m == 1).then(|| {
-            Multilevel::new(
-                grid,
-                nodes,
-                basis,
-                moment,
-                used,
-                &self.reduced,
-                positions,
-                volumes,
-                &pairs,
-            )
-        });
-        let precondition = |r: &[f64], z: &mut [f64]| {
-            precondition(r, z);
-            if let Some(coarse) = &coarse {
-                coarse.correct(r, z);
-            }
-            // The coarse levels' pseudo-inverse can hand back a direction almost in K's null
-            // space (per-body polynomials): d·Kd then falls to round-off and the iteration
-            // stopped early, unconverged (granular collapse breaking up: an inverted particle).
-            null.project(z);
-        };
+        self.remove_null_part(grid, nodes, &body_of, &mut rhs);
         // Started from zero (a start from the last step's coefficients would save iterations
         // but tie the step to a history that a checkpoint does not hold), stopping when the
         // preconditioned residual has fallen to `VC_SOLVE_TOLERANCE` of the right-hand side's.
@@ -507,22 +442,12 @@ impl<const D: usize> VcCorrection<D> {
         let mut rz = dot(&r, &z);
         let target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * rz;
         let mut iterations = 0;
-        let mut restarted = true;
         while rz > target && iterations < VC_SOLVE_MAX_ITERATIONS {
             apply(&d, &mut kd, &mut mean);
             let dkd = dot(&d, &kd);
             if dkd <= 0.0 {
-                // A search direction with no curvature: rounding has left it (almost) in K's
-                // null space. Restart once along the preconditioned residual; if that has
-                // none either, the residual is what no correction can reduce.
-                if restarted {
-                    break;
-                }
-                restarted = true;
-                d.copy_from_slice(&z);
-                continue;
+                break;
             }
-            restarted = false;
             let alpha = rz / dkd;
             zeta.par_iter_mut()
                 .zip(&d)
@@ -546,10 +471,17 @@ impl<const D: usize> VcCorrection<D> {
         self.xi = zeta;
     }
 
-    /// `K`'s null space: per body, the node coefficients of every global polynomial `P` of
-    /// degree < n, re-expanded about each node, `P(x_c + h (d_I + z)) = Σ_e N_Ie z^e`,
-    /// `d_I = (x_I − x_c)/h` about the body's node centroid `x_c` (binomial coefficients).
-    fn null_space(&self, grid: &Grid<D>, nodes: &GridNodes<D>, body_of: &[usize]) -> NullSpace {
+    /// Removes from `rhs` (per slot, `m` values per direction) its projection onto `K`'s null
+    /// space: per body, the node coefficients of every global polynomial `P` of degree < n,
+    /// re-expanded about each node, `P(x_c + h (d_I + z)) = Σ_e N_Ie z^e`, `d_I = (x_I − x_c)/h`
+    /// about the body's node centroid `x_c` (binomial coefficients).
+    fn remove_null_part(
+        &self,
+        grid: &Grid<D>,
+        nodes: &GridNodes<D>,
+        body_of: &[usize],
+        rhs: &mut [f64],
+    ) {
         let m = self.m();
         let exps = self.basis.exponents();
         let bodies = body_of.iter().map(|&b| b + 1).max().unwrap_or(0);
@@ -562,38 +494,60 @@ impl<const D: usize> VcCorrection<D> {
                 centroid[b].1 += position(slot);
             }
         }
+        let binomial = |n: u32, k: u32| -> f64 {
+            (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
+        };
         // N_I[e][f]: coefficient of z^e in the re-expansion of the monomial f.
-        let mut n = vec![0.0; body_of.len() * m * m];
-        for (slot, n) in n.chunks_exact_mut(m * m).enumerate() {
-            if self.used[slot] {
-                let b = body_of[slot];
-                let d = (position(slot) - centroid[b].1 / centroid[b].0) / h;
-                multilevel::reexpansion(exps, exps, &std::array::from_fn(|a| d[a]), 1.0, n);
+        let null_at = |slot: usize, out: &mut [f64]| {
+            let b = body_of[slot];
+            let d = (position(slot) - centroid[b].1 / centroid[b].0) / h;
+            for (e, ee) in exps.iter().enumerate() {
+                for (f, ff) in exps.iter().enumerate() {
+                    out[e * m + f] = if (0..D).all(|a| ee[a] <= ff[a]) {
+                        (0..D)
+                            .map(|a| binomial(ff[a], ee[a]) * d[a].powi((ff[a] - ee[a]) as i32))
+                            .product()
+                    } else {
+                        0.0
+                    };
+                }
             }
-        }
-        // Per body: G = Σ_I N_Iᵀ N_I.
+        };
+        // Per body: G = Σ_I N_Iᵀ N_I and t_k = Σ_I N_Iᵀ r_Ik.
         let mut gram = vec![DMatrix::<f64>::zeros(m, m); bodies];
+        let mut t = vec![DMatrix::<f64>::zeros(m, D); bodies];
+        let mut n = vec![0.0; m * m];
         for (slot, &b) in body_of.iter().enumerate() {
             if !self.used[slot] {
                 continue;
             }
-            let n = &n[slot * m * m..][..m * m];
+            null_at(slot, &mut n);
+            let r = &rhs[slot * m * D..(slot + 1) * m * D];
             for f in 0..m {
                 for g in 0..m {
                     gram[b][(f, g)] += (0..m).map(|e| n[e * m + f] * n[e * m + g]).sum::<f64>();
                 }
+                for k in 0..D {
+                    t[b][(f, k)] += (0..m).map(|e| n[e * m + f] * r[k * m + e]).sum::<f64>();
+                }
             }
         }
-        NullSpace {
-            m,
-            dim: D,
-            body_of: body_of
-                .iter()
-                .zip(&self.used)
-                .map(|(&b, &u)| if u { b } else { usize::MAX })
-                .collect(),
-            n,
-            gram: gram.into_iter().map(|g| g.cholesky()).collect(),
+        let alpha: Vec<Option<DMatrix<f64>>> = gram
+            .into_iter()
+            .zip(t)
+            .map(|(g, t)| g.cholesky().map(|c| c.solve(&t)))
+            .collect();
+        for (slot, &b) in body_of.iter().enumerate() {
+            let Some(alpha) = alpha[b].as_ref().filter(|_| self.used[slot]) else {
+                continue;
+            };
+            null_at(slot, &mut n);
+            let r = &mut rhs[slot * m * D..(slot + 1) * m * D];
+            for k in 0..D {
+                for e in 0..m {
+                    r[k * m + e] -= (0..m).map(|f| n[e * m + f] * alpha[(f, k)]).sum::<f64>();
+                }
+            }
         }
     }
 
@@ -605,13 +559,6 @@ impl<const D: usize> VcCorrection<D> {
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.
     pub fn reduced_to_first_order(&self, nodes: &GridNodes<D>, n: usize) -> bool {
         self.reduced.get(nodes.slot(n)).copied().unwrap_or(false)
-    }
-
-    /// Whether node `n` (active) got no correction: the particles barely reach it
-    /// (`Σ_p V_p |Ψ_I|` at most `VC_MIN_RELATIVE_SUPPORT` of the largest node's), or only
-    /// boundary points do.
-    pub fn uncorrected(&self, nodes: &GridNodes<D>, n: usize) -> bool {
-        !self.used.get(nodes.slot(n)).copied().unwrap_or(false)
     }
 
     /// The correction `ζ_I·Q_I(x_p) − μ_p` to add to `∇Ψ_I(x_p)` for the node `n` (already
@@ -642,9 +589,6 @@ impl<const D: usize> VcCorrection<D> {
     ) -> Vector<D> {
         let m = self.m();
         let slot = slot as usize;
-        if !self.used[slot] {
-            return Vector::<D>::zeros();
-        }
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
         if m == 1 {
             return (Vector::<D>::from_fn(|k, _| r[k]) - self.mean[p]) * weight.abs();
@@ -654,143 +598,6 @@ impl<const D: usize> VcCorrection<D> {
         self.basis_at(&z, &mut q[..m], None);
         (Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum()) - self.mean[p])
             * weight.abs()
-    }
-}
-
-/// `K`'s null space (see [`VcCorrection::null_space`]): per used slot its body and its
-/// re-expansion `N_I`, per body the Cholesky factor of `Σ_I N_Iᵀ N_I`.
-struct NullSpace {
-    m: usize,
-    dim: usize,
-    body_of: Vec<usize>,
-    n: Vec<f64>,
-    gram: Vec<Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>>,
-}
-
-impl NullSpace {
-    /// Removes from `v` (per slot, `m` values per direction) its projection onto the null space.
-    fn project(&self, v: &mut [f64]) {
-        let (m, dim) = (self.m, self.dim);
-        let mut t = vec![DMatrix::<f64>::zeros(m, dim); self.gram.len()];
-        for (slot, &b) in self.body_of.iter().enumerate() {
-            if b == usize::MAX {
-                continue;
-            }
-            let n = &self.n[slot * m * m..][..m * m];
-            let r = &v[slot * m * dim..][..m * dim];
-            for f in 0..m {
-                for k in 0..dim {
-                    t[b][(f, k)] += (0..m).map(|e| n[e * m + f] * r[k * m + e]).sum::<f64>();
-                }
-            }
-        }
-        let alpha: Vec<Option<DMatrix<f64>>> = self
-            .gram
-            .iter()
-            .zip(t)
-            .map(|(g, t)| g.as_ref().map(|c| c.solve(&t)))
-            .collect();
-        for (slot, &b) in self.body_of.iter().enumerate() {
-            let Some(alpha) = alpha.get(b).and_then(|a| a.as_ref()) else {
-                continue;
-            };
-            let n = &self.n[slot * m * m..][..m * m];
-            let r = &mut v[slot * m * dim..][..m * dim];
-            for k in 0..dim {
-                for e in 0..m {
-                    r[k * m + e] -= (0..m).map(|f| n[e * m + f] * alpha[(f, k)]).sum::<f64>();
-                }
-            }
-        }
-    }
-}
-
-/// The particle–node pairs of one solve: per particle that counts, the slots of its support
-/// and their weights `|Ψ_I(x_p)|`; and per slot the pairs that reach it, in particle order.
-struct Pairs {
-    start: Vec<usize>,
-    slot: Vec<u32>,
-    weight: Vec<f64>,
-    /// The weight over the particle's sum of weights (the mean's).
-    share: Vec<f64>,
-    node_start: Vec<usize>,
-    /// Per slot, in particle order: the particle and its volume times its weight.
-    node_particle: Vec<u32>,
-    node_weight: Vec<f64>,
-}
-
-impl Pairs {
-    fn new(
-        slots: usize,
-        volumes: &[f64],
-        support: impl Fn(usize, &mut dyn FnMut(usize, f64)) + Sync,
-    ) -> Self {
-        let particles = volumes.len();
-        // Per chunk of particles: their pair counts, then their pairs.
-        type Chunk = (Vec<usize>, Vec<(u32, f64)>);
-        let chunks: Vec<Chunk> = (0..particles)
-            .collect::<Vec<_>>()
-            .par_chunks(1024)
-            .map(|ps| {
-                let (mut counts, mut list) = (Vec::with_capacity(ps.len()), Vec::new());
-                for &p in ps {
-                    let before = list.len();
-                    support(p, &mut |slot, w| list.push((slot as u32, w)));
-                    counts.push(list.len() - before);
-                }
-                (counts, list)
-            })
-            .collect();
-        let total: usize = chunks.iter().map(|c| c.1.len()).sum();
-        let mut pairs = Pairs {
-            start: Vec::with_capacity(particles + 1),
-            slot: Vec::with_capacity(total),
-            weight: Vec::with_capacity(total),
-            share: Vec::new(),
-            node_start: vec![0; slots + 1],
-            node_particle: vec![0; total],
-            node_weight: vec![0.0; total],
-        };
-        pairs.start.push(0);
-        for (counts, list) in chunks {
-            for c in counts {
-                let p = pairs.start.len() - 1;
-                pairs.start.push(pairs.start[p] + c);
-            }
-            for (slot, w) in list {
-                pairs.slot.push(slot);
-                pairs.weight.push(w);
-            }
-        }
-        let (start, weight) = (&pairs.start, &pairs.weight);
-        pairs.share = (0..particles)
-            .into_par_iter()
-            .flat_map_iter(|p| {
-                let range = start[p]..start[p + 1];
-                let sum: f64 = weight[range.clone()].iter().sum();
-                range.map(move |i| weight[i] / sum)
-            })
-            .collect();
-        for &s in &pairs.slot {
-            pairs.node_start[s as usize + 1] += 1;
-        }
-        for s in 0..slots {
-            pairs.node_start[s + 1] += pairs.node_start[s];
-        }
-        let mut fill = pairs.node_start.clone();
-        for (p, &volume) in volumes.iter().enumerate() {
-            for i in pairs.start[p]..pairs.start[p + 1] {
-                let s = pairs.slot[i] as usize;
-                pairs.node_particle[fill[s]] = p as u32;
-                pairs.node_weight[fill[s]] = volume * pairs.weight[i];
-                fill[s] += 1;
-            }
-        }
-        pairs
-    }
-
-    fn of_particle(&self, p: usize) -> std::ops::Range<usize> {
-        self.start[p]..self.start[p + 1]
     }
 }
 
