@@ -54,6 +54,10 @@ pub struct Scene {
     pub materials: Vec<MaterialSpec>,
     pub bodies: Vec<BodySpec>,
     pub run: RunSpec,
+    /// The same scene once more with these options instead of `[options]` (keys and defaults
+    /// as there): the runner's picture then shows both runs side by side on one colour scale.
+    #[serde(default)]
+    pub compare: Option<OptionsSpec>,
     /// Directory of the scene file: relative particle files are found from it.
     #[serde(skip)]
     pub base: PathBuf,
@@ -383,6 +387,15 @@ impl Scene {
                 "grid.origin has {d} components: give 2 (2D) or 3 (3D)"
             ))),
         }
+    }
+
+    /// The scene to compare with: this one with the `[compare]` options, if it has them.
+    pub fn comparison(&self) -> Option<Scene> {
+        self.compare.as_ref().map(|options| Scene {
+            options: options.clone(),
+            compare: None,
+            ..self.clone()
+        })
     }
 
     /// Builds the simulation: grid, options, walls, materials, then the bodies' particles.
@@ -762,7 +775,33 @@ mod tests {
             let scene = Scene::from_toml(text, name).unwrap();
             assert!(!scene.title.is_empty(), "{name} has a title");
             scene.build().unwrap_or_else(|e| panic!("{name}: {e}"));
+            if let Some(other) = scene.comparison() {
+                other
+                    .build()
+                    .unwrap_or_else(|e| panic!("{name}, [compare]: {e}"));
+            }
         }
+    }
+
+    /// The default scene compares the seed's method with the plain B-spline: `[compare]`
+    /// replaces the options whole and keeps the rest of the scene.
+    #[test]
+    fn the_comparison_takes_the_compare_options_and_nothing_else() {
+        let scene = Scene::from_toml(BUNDLED[0].1, "disks").unwrap();
+        assert_eq!(scene.options.shape, ShapeName::Rk);
+        assert_eq!(scene.options.integration, IntegrationName::Vc);
+        let other = scene.comparison().expect("disks has a [compare] table");
+        assert_eq!(other.options.shape, ShapeName::Bspline2);
+        assert_eq!(other.options.integration, IntegrationName::MaterialPoint);
+        assert!(other.compare.is_none());
+        assert_eq!(other.bodies.len(), scene.bodies.len());
+        assert_eq!(other.run.end_time, scene.run.end_time);
+        let e = Scene::from_toml(
+            &format!("{}\n[compare]\nshape = \"quartic\"\n", BUNDLED[3].1),
+            "bad.toml",
+        )
+        .unwrap_err();
+        assert!(e.message.contains("quartic"), "{}", e.message);
     }
 
     /// Misspelt keys, missing keys and values of the wrong type name their line and field.

@@ -51,6 +51,46 @@ fn runs_a_bundled_scene_to_its_end() {
     std::fs::remove_dir_all(out).unwrap();
 }
 
+/// The default scene runs twice, RK + VC and then its `[compare]` options (the quadratic
+/// B-spline), and draws the two side by side: a PNG two panels wide, both summaries printed.
+#[test]
+fn the_default_scene_draws_both_runs_side_by_side() {
+    let out = scratch("compare");
+    let (ok, stdout, stderr) = rkmpm(&[
+        "--end-time",
+        "0.05",
+        "--frames",
+        "0",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("shape Rk { order: 1, support: 2.0 }, Vc { order: 1 }"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("compared with the [compare] options"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("shape BSpline2, MaterialPoint"), "{stdout}");
+    assert_eq!(
+        stdout.matches("simulated time: 5.0000e-2 s").count(),
+        2,
+        "{stdout}"
+    );
+    let png = std::fs::read(out.join("disks.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let width = u32::from_be_bytes(png[16..20].try_into().unwrap());
+    assert_eq!(width, 1600, "two panels of 800 pixels");
+    assert!(
+        !out.join("disks.pvd").exists(),
+        "--frames 0 writes no series"
+    );
+    std::fs::remove_dir_all(out).unwrap();
+}
+
 /// Overrides: `--end-time`, `--frames 0` (no output) and a scene file by path.
 #[test]
 fn runs_a_scene_file_with_overrides() {

@@ -47,12 +47,28 @@ fn close<const D: usize>(name: &str, file: &Sim<D>, rust: &Sim<D>, slack: f64) {
     assert!(&a == b, "{name}: particles differ");
 }
 
+/// The default scene runs RK1 + VC1 and compares it with the quadratic B-spline (`[compare]`):
+/// both are the Rust scene with those options.
 #[test]
 fn disks() {
-    let SceneSim::D2(file) = scene("disks") else {
+    let text = BUNDLED.iter().find(|(n, _)| *n == "disks").unwrap().1;
+    let scene = Scene::from_toml(text, "disks").unwrap();
+    let SceneSim::D2(file) = scene.build().unwrap() else {
         panic!("2D")
     };
-    same("disks", &file, &colliding_disks(40).unwrap());
+    let mut rust = colliding_disks(40).unwrap();
+    rust.set_shape(rkmpm::Shape::Rk {
+        order: 1,
+        support: 2.0,
+    })
+    .unwrap();
+    rust.set_integration(rkmpm::Integration::Vc { order: 1 })
+        .unwrap();
+    same("disks", &file, &rust);
+    let SceneSim::D2(bspline) = scene.comparison().unwrap().build().unwrap() else {
+        panic!("2D")
+    };
+    same("disks [compare]", &bspline, &colliding_disks(40).unwrap());
 }
 
 #[test]

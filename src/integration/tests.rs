@@ -121,14 +121,24 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
             .collect(),
         None => Vec::new(),
     };
-    if !reduced.is_empty() {
+    // Nodes the particles barely reach get no correction of their own (`uncorrected`).
+    let uncorrected: Vec<usize> = match &vc {
+        Some(vc) => res
+            .keys()
+            .copied()
+            .filter(|&n| vc.uncorrected(&work.nodes, n))
+            .collect(),
+        None => Vec::new(),
+    };
+    if !reduced.is_empty() || !uncorrected.is_empty() {
         eprintln!(
-            "{} of {} nodes reduced to order 1",
+            "{} of {} nodes reduced to order 1, {} uncorrected",
             reduced.len(),
-            res.len()
+            res.len(),
+            uncorrected.len()
         );
     }
-    for n in &reduced {
+    for n in reduced.iter().chain(&uncorrected) {
         res.remove(n);
     }
     work.nodes.reset();

@@ -154,6 +154,16 @@ fn check(scene: &str) -> Result<(), String> {
         SceneSim::D2(m) => describe(&s, m),
         SceneSim::D3(m) => describe(&s, m),
     }
+    if let Some(other) = s.comparison() {
+        let sim = other
+            .build()
+            .map_err(|e| format!("[compare]: {}", e.message))?;
+        println!("compared with the [compare] options:");
+        match &sim {
+            SceneSim::D2(m) => describe(&other, m),
+            SceneSim::D3(m) => describe(&other, m),
+        }
+    }
     println!("ok");
     Ok(())
 }
@@ -210,10 +220,81 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     std::fs::create_dir_all(&args.out)
         .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
-    match scene.build().map_err(|e| e.message)? {
-        SceneSim::D2(mut sim) => run_scene(&scene, &mut sim, &args),
-        SceneSim::D3(mut sim) => run_scene(&scene, &mut sim, &args),
+    // The comparison run, if the scene has one, writes no frames: its picture is the point.
+    let comparison = scene.comparison().map(|mut other| {
+        other.run.frames = 0;
+        other
+    });
+    let other = comparison
+        .as_ref()
+        .map(|other| {
+            other
+                .build()
+                .map_err(|e| format!("[compare]: {}", e.message))
+        })
+        .transpose()?;
+    match (scene.build().map_err(|e| e.message)?, other, &comparison) {
+        (SceneSim::D2(mut sim), None, _) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D3(mut sim), None, _) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D2(mut sim), Some(SceneSim::D2(mut o)), Some(c)) => {
+            run_scenes(&scene, &mut sim, Some((c, &mut o)), &args)
+        }
+        (SceneSim::D3(mut sim), Some(SceneSim::D3(mut o)), Some(c)) => {
+            run_scenes(&scene, &mut sim, Some((c, &mut o)), &args)
+        }
+        _ => Err("[compare] gave a scene of another dimension".into()),
     }
+}
+
+/// Runs the scene, then its comparison if it has one, and writes the picture: one panel, or
+/// the two runs side by side on one colour scale.
+fn run_scenes<const D: usize>(
+    scene: &Scene,
+    sim: &mut Sim<D>,
+    other: Option<(&Scene, &mut Sim<D>)>,
+    args: &RunArgs,
+) -> Result<(), String> {
+    run_scene(scene, sim, args)?;
+    let other = match other {
+        Some((s, o)) => {
+            println!("\ncompared with the [compare] options:");
+            describe(s, o);
+            run_scene(s, o, args)?;
+            Some(o)
+        }
+        None => None,
+    };
+    if let Some(field) = &scene.run.png {
+        let path = args.out.join(format!("{}.png", scene.run.output));
+        let mut runs = vec![(&*sim, method(sim))];
+        if let Some(o) = &other {
+            runs.push((&**o, method(o)));
+        }
+        snapshot::write_panels(&runs, field, &scene.title, &path)?;
+        println!("picture: {} (coloured by {field})", path.display());
+    }
+    Ok(())
+}
+
+/// The method of a run in a mechanician's words: shape functions, integration, transfer.
+fn method<const D: usize>(sim: &Sim<D>) -> String {
+    let o = sim.options();
+    let shape = match o.shape {
+        rkmpm::Shape::Linear => "linear hats".to_string(),
+        rkmpm::Shape::BSpline2 => "quadratic B-spline".to_string(),
+        rkmpm::Shape::BSpline3 => "cubic B-spline".to_string(),
+        rkmpm::Shape::Rk { order, support } => format!("RK order {order}, support {support}"),
+    };
+    let integration = match o.integration {
+        rkmpm::Integration::MaterialPoint => "material points".to_string(),
+        rkmpm::Integration::Vc { order } => format!("VC order {order}"),
+    };
+    let transfer = match o.transfer {
+        rkmpm::Transfer::Apic => "APIC".to_string(),
+        rkmpm::Transfer::PicFlip { flip } => format!("PIC/FLIP {flip}"),
+        rkmpm::Transfer::Mls => "MLS".to_string(),
+    };
+    format!("{shape}, {integration}, {transfer}")
 }
 
 /// Steps to the end time in chunks of adaptive steps, writing frames and updating the bar.
@@ -301,11 +382,6 @@ fn run_scene<const D: usize>(
     }
     bar.finish_and_clear();
     summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
-    if let Some(field) = &run.png {
-        let path = args.out.join(format!("{}.png", run.output));
-        snapshot::write(sim, field, &scene.title, &path)?;
-        println!("picture: {} (coloured by {field})", path.display());
-    }
     Ok(())
 }
 

@@ -82,14 +82,19 @@ fn colour(t: f64) -> RGBColor {
     )
 }
 
-/// Writes the picture of `sim` coloured by `field` to `path`.
-pub fn write<const D: usize>(
-    sim: &Sim<D>,
+/// Writes the pictures of several runs of one scene side by side, each under its label, on one
+/// colour scale and the same axes, so that their fields compare at a glance.
+pub fn write_panels<const D: usize>(
+    runs: &[(&Sim<D>, String)],
     field: &str,
     title: &str,
     path: &Path,
 ) -> Result<(), String> {
-    let (v, label) = values(sim, field)?;
+    let mut fields = Vec::with_capacity(runs.len());
+    for (sim, _) in runs {
+        fields.push(values(*sim, field)?);
+    }
+    let label = fields.first().map(|f| f.1.clone()).unwrap_or_default();
     let fail = |e: Box<dyn std::error::Error>| format!("writing {}: {e}", path.display());
     plotters::style::register_font(
         "sans-serif",
@@ -97,54 +102,78 @@ pub fn write<const D: usize>(
         include_bytes!("../../../assets/fonts/DejaVuSans.ttf"),
     )
     .map_err(|_| "the bundled font cannot be read".to_string())?;
-    let x = &sim.particles().position;
     let (a, b) = (0, D - 1);
+    let cell = runs
+        .iter()
+        .map(|(s, _)| s.grid().cell_size)
+        .fold(0.0, f64::max);
     let range = |axis: usize| {
-        let lo = x.iter().map(|p| p[axis]).fold(f64::INFINITY, f64::min);
-        let hi = x.iter().map(|p| p[axis]).fold(f64::NEG_INFINITY, f64::max);
-        let pad = 0.05 * (hi - lo).max(sim.grid().cell_size);
+        let (lo, hi) = runs
+            .iter()
+            .flat_map(|(s, _)| s.particles().position.iter().map(move |p| p[axis]))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| {
+                (l.min(c), h.max(c))
+            });
+        let pad = 0.05 * (hi - lo).max(cell);
         (lo - pad, hi + pad)
     };
     let ((x0, x1), (y0, y1)) = (range(a), range(b));
-    let (lo, hi) = v
+    let (lo, hi) = fields
         .iter()
+        .flat_map(|f| f.0.iter())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &c| {
             (l.min(c), h.max(c))
         });
     let span = if hi > lo { hi - lo } else { 1.0 };
-    let width = 1000u32;
+    let panel = if runs.len() > 1 { 800u32 } else { 1000 };
+    let width = panel * runs.len().max(1) as u32;
+    let head = if runs.len() > 1 { 40.0 } else { 0.0 };
     let height =
-        ((width as f64 - 90.0) * (y1 - y0) / (x1 - x0) + 110.0).clamp(300.0, 1400.0) as u32;
+        ((panel as f64 - 90.0) * (y1 - y0) / (x1 - x0) + 110.0 + head).clamp(300.0, 1400.0) as u32;
     let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| fail(Box::new(e)))?;
+    let time = runs.first().map_or(0.0, |(s, _)| s.time());
+    let scale = format!("{label} from {lo:.3e} (blue) to {hi:.3e} (red)");
+    let (root, caption) = if runs.len() > 1 {
+        let area = root
+            .titled(
+                &format!("{title}, t = {time:.4e} s: {scale}, one scale for both"),
+                ("sans-serif", 18),
+            )
+            .map_err(|e| fail(Box::new(e)))?;
+        (area, None)
+    } else {
+        (root, Some(format!("{title}, t = {time:.4e} s: {scale}")))
+    };
     let axes = ["x", "y", "z"];
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "{title}, t = {:.4e} s: {label} from {lo:.3e} (blue) to {hi:.3e} (red)",
-                sim.time()
-            ),
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(|e| fail(Box::new(e)))?;
-    chart
-        .configure_mesh()
-        .x_desc(format!("{} (m)", axes[a]))
-        .y_desc(format!("{} (m)", axes[b]))
-        .draw()
-        .map_err(|e| fail(Box::new(e)))?;
-    let dot = ((width as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
-    chart
-        .draw_series(
-            x.iter()
-                .zip(&v)
-                .map(|(p, &c)| Circle::new((p[a], p[b]), dot, colour((c - lo) / span).filled())),
-        )
-        .map_err(|e| fail(Box::new(e)))?;
+    let areas = root.split_evenly((1, runs.len().max(1)));
+    for ((area, (sim, name)), (v, _)) in areas.iter().zip(runs).zip(&fields) {
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                caption.clone().unwrap_or_else(|| name.clone()),
+                ("sans-serif", 16),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| fail(Box::new(e)))?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("{} (m)", axes[a]))
+            .y_desc(format!("{} (m)", axes[b]))
+            .draw()
+            .map_err(|e| fail(Box::new(e)))?;
+        let dot = ((panel as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
+        let x = &sim.particles().position;
+        chart
+            .draw_series(
+                x.iter().zip(v).map(|(p, &c)| {
+                    Circle::new((p[a], p[b]), dot, colour((c - lo) / span).filled())
+                }),
+            )
+            .map_err(|e| fail(Box::new(e)))?;
+    }
     root.present().map_err(|e| fail(Box::new(e)))?;
     Ok(())
 }
