@@ -360,7 +360,7 @@ mod tests {
             (fa - a).abs() < 1e-12 && (fv - v_bl).abs() < 1e-9,
             "{fa} {fv}"
         );
-        // Session 18's 3D runs: 300 → 159.6, 400 → 266.3 m/s gave a = 0.80, v_bl ≈ 225 m/s.
+        // The 3D runs of docs/validation/FINDINGS.md: 300 → 159.6, 400 → 266.3 m/s gave a = 0.80, v_bl ≈ 225 m/s.
         let (fa, fv) = recht_ipson_fit(&[(300.0, 159.6), (400.0, 266.3)]).unwrap();
         assert!(
             (fa - 0.806).abs() < 1e-3 && (fv - 225.3).abs() < 0.1,

@@ -339,7 +339,7 @@ impl BSpline {
 /// time transposed in registers and stored as four whole rows, a remaining pair as 2-lane
 /// stores, a last one value by value. Only data movement, so the same bits as storing each
 /// value. Storing every value on its own (24 scalar stores in 2D) held a quarter of the shape
-/// phase's samples on an Intel Xeon (BENCHMARKS.md, session 14).
+/// phase's samples on an Intel Xeon (BENCHMARKS.md).
 ///
 /// # Safety
 /// The processor has AVX2 (inside [`crate::cpu::wide`]).

@@ -494,8 +494,8 @@ mod tests {
         a.iter().zip(b).map(|(x, y)| x * y).sum()
     }
 
-    /// The evaluation of session 4 (the reference): `M`, `∂M b` and the stencil summed node by
-    /// node with `H` and `∂H` per node.
+    /// The reference evaluation: `M`, `∂M b` and the stencil summed node by node with `H` and
+    /// `∂H` per node.
     fn evaluate_by_node_sums<const D: usize>(
         rk: &ReproducingKernel<D>,
         grid: &Grid<D>,

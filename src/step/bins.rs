@@ -29,12 +29,12 @@ const MIN_BLOCK: usize = 4;
 /// Nodes per block along axis 0, the fastest storage axis of the grid and, usually, of the
 /// particles (lattices are added with axis 0 fastest): a block's particles then lie in long runs
 /// of the particle arrays. Measured on the 2D quadratic B-spline benchmark block (10^6
-/// particles, one thread), particle to grid took 149 ns per particle with blocks of 4 × 4 nodes,
-/// 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4 (session 3); after the scatter was
-/// specialised (session 8) 41 ns with 32 × 4, 34 with 128 × 4 and 256 × 4, 27 with blocks as
-/// long as the grid (which leave too few blocks per colour to share among threads when a body
-/// is thin along axis 1). The whole step with 128 against 32, alternating, twice each: 2D 10^6
-/// 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
+/// particles, one thread), particle to grid with a generic scatter took 149 ns per particle with
+/// blocks of 4 × 4 nodes, 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4; with the
+/// specialised scatter it has now, 41 ns with 32 × 4, 34 with 128 × 4 and 256 × 4, 27 with
+/// blocks as long as the grid (which leave too few blocks per colour to share among threads when
+/// a body is thin along axis 1). The whole step with 128 against 32, alternating, twice each: 2D
+/// 10^6 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
 const LONG_BLOCK: usize = 128;
 
 /// Occupied rows of blocks from which particle to grid runs by rows ([`Bins::tasks`]): a row
@@ -110,7 +110,7 @@ impl<const D: usize> BlockLayout<D> {
 /// incrementing a block's count particle by particle: that is a chain of loads and stores to
 /// one address, a store-to-load forwarding latency per particle on processors that do not
 /// rename memory. 2D MLS, 10^6 particles, Intel Xeon: bins 5.0–5.3 → 1.75 ns per
-/// particle-step on one thread, 2.8 → 1.05 on two (BENCHMARKS.md, session 14).
+/// particle-step on one thread, 2.8 → 1.05 on two (BENCHMARKS.md).
 fn runs(keys: &[u32]) -> impl Iterator<Item = (u32, u32)> + '_ {
     let mut rest = keys;
     std::iter::from_fn(move || {

@@ -297,7 +297,7 @@ pub(crate) const CHUNK: usize = 8;
 
 /// Chunks ahead whose new state grid to particle asks the cache for (32 particles): 2D MLS,
 /// 10^5 particles, two threads, the step 1.05× faster with 4, 1.04× with 2, 1.02× with 8, 1.01×
-/// with 16, against none (BENCHMARKS.md, session 17).
+/// with 16, against none (BENCHMARKS.md).
 const AHEAD: usize = 4;
 
 /// The particles of a chunk of grid to particle: slots `first..first + len`, each holding
@@ -395,7 +395,7 @@ where
         assert_eq!(source.len(), ps.len(), "a permutation of the particles");
     }
     // One compiled pass per case: MLS takes no gradient sum. (One per `source` too made no
-    // measurable difference; BENCHMARKS.md, session 15.)
+    // measurable difference; BENCHMARKS.md.)
     if plan.mls {
         gather_all::<true, D, F>(
             grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,

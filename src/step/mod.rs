@@ -185,7 +185,7 @@ impl<const D: usize> Sim<D> {
     /// parallel passes it starts then run on the pool's threads without the calling thread
     /// handing each one over and sleeping until it ends (two thread switches per pass, about
     /// a dozen passes per step). 2D MLS, 10^5 particles, one thread: 13.8–14.0 → 15.1–15.4
-    /// million particle-steps/s; two threads 26.2–28.3 → 28.1–28.4 (BENCHMARKS.md, session 16).
+    /// million particle-steps/s; two threads 26.2–28.3 → 28.1–28.4 (BENCHMARKS.md).
     fn step_in_pool(&mut self, dt: f64) -> Result<()> {
         // The surface VC finds from the particles this step replaces the last one, which a
         // rejected step restores.
