@@ -33,18 +33,9 @@
 //! singular (too few particles in its support for the order) is preconditioned with its
 //! constant part only, and so corrected to order 1 ([`VcCorrection::reduced_to_first_order`]).
 //! A node that the particles barely reach while a surface point is near it has an equality the
-//! particles can meet only with a large correction on a node of almost no mass. Where its
-//! particle sum `Σ_p V_p |Ψ_I|` is at most `VC_MIN_RELATIVE_SUPPORT` (1e-10) of the largest
-//! node's, it gets no correction and takes no part in its particles' means (their corrections
-//! still sum to zero over the nodes that have one). Two RK1 + VC1 disks that collide and part
-//! (the default scene, 600 steps) move their momentum by 8e-4 of `Σ m|v|` when every node is
-//! corrected (nodes whose `Ψ` is zero at every particle while its gradient is not), 4e-10 with
-//! only those left out, 3e-13 with the threshold at 1e-12, 4e-14 at 1e-10 and 1e-8; at 1e-6 two
-//! corner nodes of a jittered 3D box are left out and its patch test fails (4e-8 m/s). Above
-//! the threshold, the grid update's edge-mass floor (signed shape functions) limits such a
-//! node's acceleration and hands the force it holds back to the whole field, so that momentum
-//! is still conserved
-//! (`crate::step::grid_update`).
+//! particles can meet only with a large correction on a node of almost no mass; the grid
+//! update's edge-mass floor limits its acceleration and hands the force it holds back to the
+//! whole field, so that momentum is still conserved (`crate::step::grid_update`).
 //!
 //! The corrected gradient is used in the internal force only (METHOD.md section 7).
 
@@ -64,10 +55,6 @@ use rayon::prelude::*;
 /// conditioned; below this smallest-to-largest eigenvalue ratio (a node whose support holds only
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
-
-/// A node whose particle sum `Σ_p V_p |Ψ_I|` is at most this fraction of the largest node's
-/// gets no correction and takes no part in its particles' means.
-pub(crate) const VC_MIN_RELATIVE_SUPPORT: f64 = 1e-10;
 
 /// The conservative correction's solve stops when the preconditioned residual norm has fallen
 /// by this factor.
@@ -249,17 +236,6 @@ impl<const D: usize> VcCorrection<D> {
                 });
             });
         }
-        // Nodes that the particles barely reach (`Σ_p V_p |Ψ_I|` a vanishing fraction of the
-        // largest) are left uncorrected: their equality could only be met by a correction that
-        // grows as the inverse of that sum, on a node of no mass.
-        let largest = (0..slots)
-            .map(|slot| self.moment[slot * m * m])
-            .fold(0.0, f64::max);
-        for (slot, used) in self.used.iter_mut().enumerate() {
-            if self.moment[slot * m * m] <= VC_MIN_RELATIVE_SUPPORT * largest {
-                *used = false;
-            }
-        }
         // Boundary sums: rhs_Ik += Ψ_I Q (n a)_k, only at nodes whose support meets a point.
         let mut q = [0.0; MAX_BASIS];
         for b in 0..boundary.len() {
@@ -350,11 +326,8 @@ impl<const D: usize> VcCorrection<D> {
                     }
                 });
         };
-        // The nodes of a particle's support that take part: a node without a correction of its
-        // own (`uncorrected`) takes no part, neither in its particles' means nor in their sums.
-        let in_support = |s: &StencilNode<D>| {
-            (s.value != 0.0 || s.gradient != Vector::<D>::zeros()) && used[nodes.slot(s.node)]
-        };
+        // Per particle: how many nodes its support holds (the mean's divisor).
+        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
         let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
         let h = grid.cell_size;
         let basis = &self.basis;
@@ -588,13 +561,6 @@ impl<const D: usize> VcCorrection<D> {
         self.reduced.get(nodes.slot(n)).copied().unwrap_or(false)
     }
 
-    /// Whether node `n` (active) got no correction: the particles barely reach it
-    /// (`Σ_p V_p |Ψ_I|` at most `VC_MIN_RELATIVE_SUPPORT` of the largest node's), or only
-    /// boundary points do.
-    pub fn uncorrected(&self, nodes: &GridNodes<D>, n: usize) -> bool {
-        !self.used.get(nodes.slot(n)).copied().unwrap_or(false)
-    }
-
     /// The correction `ζ_I·Q_I(x_p) − μ_p` to add to `∇Ψ_I(x_p)` for the node `n` (already
     /// active, in the support of particle `p` at `x`).
     #[inline]
@@ -623,9 +589,6 @@ impl<const D: usize> VcCorrection<D> {
     ) -> Vector<D> {
         let m = self.m();
         let slot = slot as usize;
-        if !self.used[slot] {
-            return Vector::<D>::zeros();
-        }
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
         if m == 1 {
             return (Vector::<D>::from_fn(|k, _| r[k]) - self.mean[p]) * weight.abs();

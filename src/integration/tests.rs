@@ -121,24 +121,14 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
             .collect(),
         None => Vec::new(),
     };
-    // Nodes the particles barely reach get no correction of their own (`uncorrected`).
-    let uncorrected: Vec<usize> = match &vc {
-        Some(vc) => res
-            .keys()
-            .copied()
-            .filter(|&n| vc.uncorrected(&work.nodes, n))
-            .collect(),
-        None => Vec::new(),
-    };
-    if !reduced.is_empty() || !uncorrected.is_empty() {
+    if !reduced.is_empty() {
         eprintln!(
-            "{} of {} nodes reduced to order 1, {} uncorrected",
+            "{} of {} nodes reduced to order 1",
             reduced.len(),
-            res.len(),
-            uncorrected.len()
+            res.len()
         );
     }
-    for n in reduced.iter().chain(&uncorrected) {
+    for n in &reduced {
         res.remove(n);
     }
     work.nodes.reset();
