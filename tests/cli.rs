@@ -67,14 +67,18 @@ fn the_default_scene_draws_both_runs_side_by_side() {
     ]);
     assert!(ok, "{stderr}");
     assert!(
-        stdout.contains("shape Rk { order: 1, support: 2.0 }, Vc { order: 1 }"),
+        stdout.contains("1 material; RK order 1, support 2, VC order 1, APIC, Usl"),
         "{stdout}"
     );
     assert!(
         stdout.contains("compared with the [compare] options"),
         "{stdout}"
     );
-    assert!(stdout.contains("shape BSpline2, MaterialPoint"), "{stdout}");
+    assert!(
+        stdout.contains("1 material; quadratic B-spline, material points, APIC, Usl"),
+        "{stdout}"
+    );
+    assert_eq!(stdout.matches("scene: ").count(), 2, "{stdout}");
     assert_eq!(
         stdout.matches("simulated time: 5.0000e-2 s").count(),
         2,

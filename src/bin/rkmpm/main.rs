@@ -173,7 +173,7 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
     let o = sim.options();
     println!("scene: {}", scene.title);
     println!(
-        "{D}D, grid {} cells of {:e} m, {} particles, {} materials, shape {:?}, {:?}, {:?}, {:?}",
+        "{D}D, grid {} cells of {:e} m, {} particles, {} material{}; {}, {:?}",
         g.cells
             .iter()
             .map(|c| c.to_string())
@@ -182,9 +182,8 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
         g.cell_size,
         sim.particles().len(),
         sim.materials().len(),
-        o.shape,
-        o.integration,
-        o.transfer,
+        if sim.materials().len() == 1 { "" } else { "s" },
+        method(sim),
         o.scheme
     );
 }
@@ -258,7 +257,6 @@ fn run_scenes<const D: usize>(
     let other = match other {
         Some((s, o)) => {
             println!("\ncompared with the [compare] options:");
-            describe(s, o);
             run_scene(s, o, args)?;
             Some(o)
         }
