@@ -4,7 +4,8 @@
 #   CMake:      find_package(rkmpm CONFIG): C with rkmpm::rkmpm (librkmpm.a) and
 #               rkmpm::rkmpm_shared (librkmpm.so), Fortran with rkmpm::fortran;
 #   pkg-config: C and Fortran (rkmpm, rkmpm-fortran), each linked shared and static.
-# Checks with readelf that the static programs do not need librkmpm.so and the shared ones do.
+# Checks with readelf that the static programs do not need librkmpm.so and the shared ones do, and
+# that the installed libraries carry no debug info.
 #
 #   scripts/test-install.sh [CARGO_TARGET_DIR]
 #
@@ -57,6 +58,12 @@ for f in "$libdir/librkmpm.a" "$libdir/librkmpm.so" "$libdir/librkmpm_fortran.a"
          "$libdir/cmake/rkmpm/rkmpmConfig.cmake" "$libdir/cmake/rkmpm/rkmpmConfigVersion.cmake" \
          "$libdir/pkgconfig/rkmpm.pc" "$libdir/pkgconfig/rkmpm-fortran.pc"; do
   [ -f "$f" ] || fail "not installed: $f"
+done
+# Lean libraries: installed without debug info (RKMPM_INSTALL_DEBUG_INFO=OFF, the default).
+for f in "$libdir/librkmpm.a" "$libdir/librkmpm.so"; do
+  debug_sections=$(readelf -S -W "$f" | grep -c '\.debug_info' || true)
+  [ "$debug_sections" = 0 ] || fail "$f still carries debug info ($debug_sections .debug_info sections)"
+  echo "   $(basename "$f"): $(du -h "$f" | cut -f1), no debug info"
 done
 grep -q "$root" "$libdir/cmake/rkmpm/rkmpmConfig.cmake" "$libdir/pkgconfig/"*.pc \
   && fail "an installed package file refers to the source or build tree"

@@ -157,9 +157,11 @@ fn damaged_files_are_refused() {
     let e = Sim::<3>::from_checkpoint_bytes(&good).err().unwrap();
     assert_eq!(e.kind, ErrorKind::InvalidArgument);
     assert!(e.message.contains("2D"), "{e}");
-    assert_eq!(
-        Sim::<2>::load(scratch("missing.rkmpm")).err().unwrap().kind,
-        ErrorKind::Io
+    let e = Sim::<2>::load(scratch("missing.rkmpm")).err().unwrap();
+    assert_eq!(e.kind, ErrorKind::Io);
+    assert!(
+        e.message.contains("reading") && e.message.contains("missing.rkmpm"),
+        "{e}"
     );
 }
 
@@ -181,4 +183,6 @@ fn failed_save_keeps_the_previous_checkpoint() {
     assert_eq!(Sim::<2>::load(&path).unwrap().steps(), 2);
     let e = sim.save(scratch("no/such/dir/x.rkmpm")).unwrap_err();
     assert_eq!(e.kind, ErrorKind::Io);
+    // The message names the file, not only the operating system's "No such file or directory".
+    assert!(e.message.contains("no/such/dir/x.rkmpm"), "{e}");
 }

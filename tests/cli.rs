@@ -192,3 +192,77 @@ fn help_and_listing() {
         );
     }
 }
+
+/// `check` refuses what `run` refuses, with the same message, before anything is computed:
+/// options the step does not support (also in `[compare]`) and a picture of no field.
+#[test]
+fn check_refuses_what_run_refuses() {
+    let (ok, disks, _) = rkmpm(&["show", "disks"]);
+    assert!(ok);
+    let dir = scratch("check");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases = [
+        (
+            disks.replace("rk_order = 1", "rk_order = 2"),
+            "APIC with a shape function that reproduces quadratics",
+        ),
+        (
+            disks
+                .replacen("transfer = \"apic\"", "transfer = \"mls\"", 1)
+                .replace("shape = \"rk\"", "shape = \"bspline2\""),
+            "the MLS transfer does not go with VC integration",
+        ),
+        (
+            disks.replace(
+                "shape = \"bspline2\"\ntransfer = \"apic\"",
+                "shape = \"linear\"\ntransfer = \"mls\"",
+            ),
+            "[compare]: the MLS transfer needs the quadratic or cubic B-spline",
+        ),
+        (
+            disks.replace("png = \"pressure\"", "png = \"plastic\""),
+            "png = \"plastic\": choose one of",
+        ),
+    ];
+    for (k, (text, message)) in cases.iter().enumerate() {
+        assert_ne!(text, &disks, "case {k} changed nothing");
+        let file = dir.join(format!("case{k}.toml"));
+        std::fs::write(&file, text).unwrap();
+        let file = file.to_str().unwrap();
+        let (ok, stdout, stderr) = rkmpm(&["check", file]);
+        assert!(!ok, "check accepted case {k}: {stdout}");
+        assert!(stderr.contains(message), "case {k}: {stderr}");
+        let out = dir.join(format!("out{k}"));
+        let (ok, _, run_err) = rkmpm(&["run", file, "--quiet", "--out", out.to_str().unwrap()]);
+        assert!(!ok, "run accepted case {k}");
+        assert!(run_err.contains(message), "case {k}: {run_err}");
+        assert!(!out.exists(), "case {k}: run created its output directory");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The summary reports what the scene's materials have: plastic strain for soil, plastic strain
+/// and damage for Johnson–Cook metal.
+#[test]
+fn the_summary_reports_damage_only_for_materials_that_have_it() {
+    for (scene, end, damage) in [("collapse", "1e-3", false), ("taylor", "1e-6", true)] {
+        let out = scratch(scene);
+        let (ok, stdout, stderr) = rkmpm(&[
+            "run",
+            scene,
+            "--end-time",
+            end,
+            "--frames",
+            "0",
+            "--png",
+            "none",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{scene}: {stderr}");
+        assert!(stdout.contains("largest plastic strain"), "{stdout}");
+        assert_eq!(stdout.contains("largest damage"), damage, "{stdout}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+}

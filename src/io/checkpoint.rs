@@ -624,7 +624,9 @@ impl<const D: usize> Sim<D> {
 
     /// Loads a simulation saved with [`Sim::save`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        Self::from_checkpoint_bytes(&std::fs::read(path)?)
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| super::io_error("reading", path, e))?;
+        Self::from_checkpoint_bytes(&bytes)
     }
 }
 

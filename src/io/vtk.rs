@@ -220,4 +220,18 @@ mod tests {
         assert!(!dir.join("bar_00001.vtu.tmp").exists());
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// A write into a directory that does not exist says which file it could not write.
+    #[test]
+    fn a_write_into_a_missing_directory_names_the_path() {
+        let sim = VibratingBar::default().build::<2>().unwrap();
+        let path = std::env::temp_dir().join("rkmpm-no-such-dir/bar.vtu");
+        let e = write_particles(&sim, &path).unwrap_err();
+        assert_eq!(e.kind, crate::error::ErrorKind::Io);
+        assert!(
+            e.message
+                .starts_with(&format!("writing {}: ", path.display())),
+            "{e}"
+        );
+    }
 }

@@ -248,8 +248,9 @@ impl<const D: usize> Sim<D> {
         Ok(())
     }
 
-    /// Refuses combinations of options that cannot run.
-    fn check_options(&self) -> Result<()> {
+    /// Refuses combinations of options that cannot run (`Unsupported`), as every step does
+    /// before it computes anything: call it to check a set-up without stepping.
+    pub fn check_options(&self) -> Result<()> {
         self.options.walls.check_fits(&self.grid)?;
         if self.options.contact.is_some()
             && (!self.boundary.is_empty() || self.options.scheme == Scheme::Musl)

@@ -76,8 +76,8 @@ impl<const D: usize> Sim<D> {
             }
             if let Err(mut e) = self.step(dt) {
                 e.message = format!(
-                    "{} (adaptive run from t = {start:e}: {taken} steps taken, stopped at \
-                     t = {:e} of {end:e})",
+                    "{} (advancing from t = {start:e} to t = {end:e}: {taken} steps taken, \
+                     the refused step would have started at t = {:e})",
                     e.message, self.time
                 );
                 return Err(e);

@@ -149,23 +149,59 @@ fn load(scene: &str) -> Result<Scene, String> {
 
 fn check(scene: &str) -> Result<(), String> {
     let s = load(scene)?;
-    let sim = s.build().map_err(|e| e.message)?;
+    let (sim, other) = validate(&s)?;
     match &sim {
         SceneSim::D2(m) => describe(&s, m),
         SceneSim::D3(m) => describe(&s, m),
     }
-    if let Some(other) = s.comparison() {
-        let sim = other
-            .build()
-            .map_err(|e| format!("[compare]: {}", e.message))?;
+    if let Some((other, sim)) = &other {
         println!("compared with the [compare] options:");
-        match &sim {
-            SceneSim::D2(m) => describe(&other, m),
-            SceneSim::D3(m) => describe(&other, m),
+        match sim {
+            SceneSim::D2(m) => describe(other, m),
+            SceneSim::D3(m) => describe(other, m),
         }
     }
     println!("ok");
     Ok(())
+}
+
+/// What `check` and `run` both do before anything is computed: builds the scene (and its
+/// comparison), and refuses what a run would refuse (combinations of options the step does
+/// not support, a picture of a field that does not exist).
+fn validate(scene: &Scene) -> Result<(SceneSim, Option<(Scene, SceneSim)>), String> {
+    if let Some(p) = &scene.run.png {
+        if !snapshot::FIELDS.contains(&p.as_str()) {
+            return Err(format!(
+                "png = {p:?}: choose one of {}",
+                snapshot::FIELDS.join(", ")
+            ));
+        }
+    }
+    let checked = |s: &Scene, what: &str| -> Result<SceneSim, String> {
+        let sim = s.build().map_err(|e| format!("{what}{}", e.message))?;
+        match &sim {
+            SceneSim::D2(m) => m.check_options(),
+            SceneSim::D3(m) => m.check_options(),
+        }
+        .map_err(|e| format!("{what}{}", e.message))?;
+        Ok(sim)
+    };
+    let sim = checked(scene, "")?;
+    // The comparison run, if the scene has one, writes no frames: its picture is the point.
+    let other = scene
+        .comparison()
+        .map(|mut other| {
+            other.run.frames = 0;
+            checked(&other, "[compare]: ").map(|sim| (other, sim))
+        })
+        .transpose()?;
+    match (&sim, &other) {
+        (SceneSim::D2(_), Some((_, SceneSim::D3(_))))
+        | (SceneSim::D3(_), Some((_, SceneSim::D2(_)))) => {
+            Err("[compare] gave a scene of another dimension".into())
+        }
+        _ => Ok((sim, other)),
+    }
 }
 
 fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
@@ -203,45 +239,25 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(p) = &args.png {
         scene.run.png = (p != "none").then(|| p.clone());
     }
-    if let Some(p) = &scene.run.png {
-        if !snapshot::FIELDS.contains(&p.as_str()) {
-            return Err(format!(
-                "png = {p:?}: choose one of {}",
-                snapshot::FIELDS.join(", ")
-            ));
-        }
-    }
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
             .map_err(|e| format!("--threads {n}: {e}"))?;
     }
+    let built = validate(&scene)?;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
-    // The comparison run, if the scene has one, writes no frames: its picture is the point.
-    let comparison = scene.comparison().map(|mut other| {
-        other.run.frames = 0;
-        other
-    });
-    let other = comparison
-        .as_ref()
-        .map(|other| {
-            other
-                .build()
-                .map_err(|e| format!("[compare]: {}", e.message))
-        })
-        .transpose()?;
-    match (scene.build().map_err(|e| e.message)?, other, &comparison) {
-        (SceneSim::D2(mut sim), None, _) => run_scenes(&scene, &mut sim, None, &args),
-        (SceneSim::D3(mut sim), None, _) => run_scenes(&scene, &mut sim, None, &args),
-        (SceneSim::D2(mut sim), Some(SceneSim::D2(mut o)), Some(c)) => {
-            run_scenes(&scene, &mut sim, Some((c, &mut o)), &args)
+    match built {
+        (SceneSim::D2(mut sim), None) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D3(mut sim), None) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D2(mut sim), Some((c, SceneSim::D2(mut o)))) => {
+            run_scenes(&scene, &mut sim, Some((&c, &mut o)), &args)
         }
-        (SceneSim::D3(mut sim), Some(SceneSim::D3(mut o)), Some(c)) => {
-            run_scenes(&scene, &mut sim, Some((c, &mut o)), &args)
+        (SceneSim::D3(mut sim), Some((c, SceneSim::D3(mut o)))) => {
+            run_scenes(&scene, &mut sim, Some((&c, &mut o)), &args)
         }
-        _ => Err("[compare] gave a scene of another dimension".into()),
+        _ => unreachable!("validate refuses a comparison of another dimension"),
     }
 }
 
@@ -347,9 +363,9 @@ fn run_scene<const D: usize>(
             sim.advance(target - sim.time(), run.cfl).map_err(|e| {
                 bar.abandon();
                 format!(
-                    "the run stopped at t = {:e} after {} steps: {}",
-                    sim.time(),
+                    "the run stopped after step {} at t = {:e} s (end time {end:e} s): {}",
                     sim.steps(),
+                    sim.time(),
                     e.message
                 )
             })?;
@@ -415,13 +431,22 @@ fn summary<const D: usize>(
     let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     if !ps.plastic.is_empty() {
         let plastic: Vec<f64> = ps.plastic.iter().map(|s| s.plastic_strain).collect();
-        let damage: Vec<f64> = ps.plastic.iter().map(|s| s.damage).collect();
-        println!(
-            "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
-            largest(&plastic),
-            largest(&damage),
-            damage.iter().filter(|&&d| d >= 1.0).count()
-        );
+        // Damage only where a material has it (Johnson–Cook), not for soil.
+        let damages = sim
+            .materials()
+            .iter()
+            .any(|m| matches!(m, rkmpm::material::Material::JohnsonCook(_)));
+        if damages {
+            let damage: Vec<f64> = ps.plastic.iter().map(|s| s.damage).collect();
+            println!(
+                "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
+                largest(&plastic),
+                largest(&damage),
+                damage.iter().filter(|&&d| d >= 1.0).count()
+            );
+        } else {
+            println!("largest plastic strain {:.3}", largest(&plastic));
+        }
     }
     println!(
         "largest pressure at the end: {:.4e} Pa",
