@@ -163,10 +163,11 @@ fn low_column_keeps_its_top() {
     );
 }
 
-/// VC on a flow whose surface breaks up: quadratic B-spline + VC1, a = 2 at 16 cells (about
-/// 30 s in release). With the lattice surface found once and carried by the grid this run
-/// stopped at step 11376 with an inverted particle; VC now finds the surface of the particles
-/// at every step. Measured: run-out 6.19 (law 6.30), height 0.864 (law 0.887). Asserted: the
+/// VC on a flow whose surface breaks up: quadratic B-spline + VC1, a = 2 at 16 cells, the
+/// surface found from the particles at every step (about 7 minutes in release on 2 cores). It
+/// needs the bound on the correction (`VC_MAX_CORRECTION`): nodes the particles barely reach got
+/// coefficients up to 3e11 / h, and a particle next to one inverted. Measured: run-out 6.28
+/// (law 6.30), height 0.824 (law 0.887). Asserted: the
 /// run ends, [`settled_inside_the_measured_band`], and the last surface closed (its area-weighted
 /// normals sum to zero to round-off) and between 0.9 and 2 times the heap's outline in length
 /// (a voxel staircase is longer than the slope it follows; holes would make it much longer).
