@@ -241,12 +241,8 @@ impl<const D: usize> BoundaryPoints<D> {
         // particles) are holes narrower than a particle; their faces would put surface points
         // inside the body. Fill every enclosed hole that lies within half a particle's mean
         // spacing of the body.
-        let mean_volume = reference_volumes
-            .iter()
-            .zip(deformation_gradients)
-            .map(|(&v0, f)| v0 * crate::determinant(f).abs())
-            .sum::<f64>()
-            / positions.len().max(1) as f64;
+        let mean_volume =
+            domains.iter().map(|d| d.2.powi(D as i32)).sum::<f64>() / domains.len().max(1) as f64;
         let reach = (0.5 * root(mean_volume) / v).round().max(1.0) as usize;
         body.fill_narrow_holes(&last, reach);
         // Faces merged by twos per tangential axis (when a half cell holds an even number of

@@ -37,8 +37,9 @@
 //! update's edge-mass floor limits its acceleration and hands the force it holds back to the
 //! whole field, so that momentum is still conserved (`crate::step::grid_update`).
 //!
-//! At order 1 such a node's coefficients are also bounded (`VC_MAX_CORRECTION`): since any `ζ` keeps the
-//! gradients summing to zero, the bound costs that node's equality and nothing of conservation.
+//! At order 1 such a node's coefficients are also bounded (`VC_MAX_CORRECTION`): since any `ζ`
+//! keeps the gradients summing to zero, the bound costs that node's equality and nothing of
+//! conservation.
 //!
 //! The corrected gradient is used in the internal force only (METHOD.md section 7).
 
