@@ -169,17 +169,9 @@ impl<const D: usize> Walls<D> {
                             nodes.body_force[n] = Vector::zeros();
                         }
                     }
-                    if let Some(l) = nodes.lumping.as_mut() {
-                        let p = wall.reflect(axis, &l.momentum[n]);
-                        l.momentum[m] += p;
-                        l.momentum[n] = Vector::zeros();
-                        if with_mass_and_force {
-                            l.mass[m] += l.mass[n];
-                            let f = wall.reflect(axis, &l.body_force[n]);
-                            l.body_force[m] += f;
-                            l.mass[n] = 0.0;
-                            l.body_force[n] = Vector::zeros();
-                        }
+                    if let Some(l) = nodes.lumping.as_mut().filter(|_| with_mass_and_force) {
+                        l.mass[m] += l.mass[n];
+                        l.mass[n] = 0.0;
                     }
                 } else if d == 0 {
                     for c in 0..D {
@@ -188,10 +180,6 @@ impl<const D: usize> Walls<D> {
                             nodes.force[n][c] = 0.0;
                             if !nodes.body_force.is_empty() {
                                 nodes.body_force[n][c] = 0.0;
-                            }
-                            if let Some(l) = nodes.lumping.as_mut() {
-                                l.momentum[n][c] = 0.0;
-                                l.body_force[n][c] = 0.0;
                             }
                         }
                     }
@@ -213,6 +201,21 @@ impl<const D: usize> Walls<D> {
                     let m = grid.node_index(mirror(grid, i, axis, side, d));
                     nodes.velocity[n] = wall.reflect(axis, &nodes.velocity[m]);
                     nodes.velocity_old[n] = wall.reflect(axis, &nodes.velocity_old[m]);
+                }
+            }
+        }
+    }
+
+    /// Sets each ghost-layer node's value in `values` to its mirror node's (a scalar per node,
+    /// in the order of [`Walls::unfold`]), for the nodes in `active`.
+    pub fn unfold_values(&self, grid: &Grid<D>, active: &[usize], values: &mut [f64]) {
+        let faces: Vec<_> = self.mirrored_faces().collect();
+        for &(axis, side, _) in faces.iter().rev() {
+            for &n in active {
+                let i = grid.node_multi_index(n);
+                let d = depth(grid, &i, axis, side);
+                if d > 0 {
+                    values[n] = values[grid.node_index(mirror(grid, i, axis, side, d))];
                 }
             }
         }

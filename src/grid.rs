@@ -159,10 +159,9 @@ pub struct GridNodes<const D: usize> {
     pub velocity_old: Vec<Vector<D>>,
     /// Velocity after the grid update and boundary conditions.
     pub velocity: Vec<Vector<D>>,
-    /// For signed shape functions only (empty otherwise): what the nonnegative lumping weights
-    /// `L_I` add over `Ψ_I` to mass, momentum and body force, `Σ_p m_p (L_I − Ψ_I)(1, v_p, b_p)`.
-    /// The grid update blends them in where `Σ m_p Ψ_I` is small against `Σ m_p L_I`.
-    pub lumping: Option<LumpingShift<D>>,
+    /// For signed shape functions only (`None` otherwise): the nonnegative lumping's masses and
+    /// each node's blend, from which `step::edge_lumping` makes the transfer weights.
+    pub lumping: Option<EdgeLumping>,
     /// Mass gradient `Σ_p m_p ∇Ψ_I(x_p)` for contact normals; empty unless contact is on.
     pub mass_gradient: Vec<Vector<D>>,
     /// Body force `Σ_p m_p Ψ_I b_p` kept apart from `force` (which then holds the internal force
@@ -181,7 +180,7 @@ pub struct GridNodes<const D: usize> {
 }
 
 impl<const D: usize> GridNodes<D> {
-    /// Sizes the storage for `grid`, with the lumping shift of signed shape functions
+    /// Sizes the storage for `grid`, with the edge lumping of signed shape functions
     /// (`lumping`) and the mass gradient of contact (`mass_gradient`) when asked for. Does nothing
     /// when the storage already fits; otherwise all fields start at zero with nothing active.
     /// All or nothing: when the storage cannot be allocated (`OutOfMemory`), the nodes are left
@@ -206,7 +205,7 @@ impl<const D: usize> GridNodes<D> {
                 * (1 + 4 * D
                     + usize::from(mass_gradient) * D
                     + usize::from(body_force) * D
-                    + usize::from(lumping) * (2 + 2 * D))
+                    + usize::from(lumping) * 2)
                 + 5;
             Error::new(
                 ErrorKind::OutOfMemory,
@@ -224,7 +223,7 @@ impl<const D: usize> GridNodes<D> {
             velocity_old: filled(n, Vector::zeros()).map_err(fail)?,
             velocity: filled(n, Vector::zeros()).map_err(fail)?,
             lumping: match lumping {
-                true => Some(LumpingShift::new(n).map_err(fail)?),
+                true => Some(EdgeLumping::new(n).map_err(fail)?),
                 false => None,
             },
             mass_gradient: match mass_gradient {
@@ -246,10 +245,10 @@ impl<const D: usize> GridNodes<D> {
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         let v = std::mem::size_of::<Vector<D>>();
-        let lumping = self.lumping.as_ref().map_or(0, |l| {
-            (l.mass.capacity() + l.blend.capacity()) * 8
-                + (l.momentum.capacity() + l.body_force.capacity()) * v
-        });
+        let lumping = self
+            .lumping
+            .as_ref()
+            .map_or(0, |l| (l.mass.capacity() + l.blend.capacity()) * 8);
         self.mass.capacity() * 8
             + (self.momentum.capacity()
                 + self.force.capacity()
@@ -364,8 +363,7 @@ impl<const D: usize> GridNodes<D> {
         let touched = SharedSlice::new(touched);
         let lumping = lumping.as_mut().map(|l| {
             (
-                [SharedSlice::new(&mut l.mass)],
-                [&mut l.momentum, &mut l.body_force].map(|v| SharedSlice::new(v.as_mut_slice())),
+                SharedSlice::new(&mut l.mass),
                 SharedSlice::new(&mut l.blend),
             )
         });
@@ -380,9 +378,8 @@ impl<const D: usize> GridNodes<D> {
             scalars.iter().for_each(|m| *m.at(n) = 0.0);
             zero(&vectors);
             *touched.at(n) = false;
-            if let Some((m, v, blend)) = &lumping {
-                *m[0].at(n) = 0.0;
-                zero(v);
+            if let Some((m, blend)) = &lumping {
+                *m.at(n) = 0.0;
                 *blend.at(n) = 1.0;
             }
         });
@@ -427,8 +424,6 @@ pub struct NodeScatter<'a, const D: usize> {
     pub mass_gradient: *mut Vector<D>,
     /// Null when the field is not kept.
     pub body_force: *mut Vector<D>,
-    /// Lumping shift: mass, momentum, body force (null without a lumping shift).
-    pub lumping: (*mut f64, *mut Vector<D>, *mut Vector<D>),
     touched: *mut bool,
     /// Slots of the nodes listed before the scatter.
     pub slot: &'a [u32],
@@ -450,25 +445,12 @@ impl<'a, const D: usize> NodeScatter<'a, D> {
                 v.as_mut_ptr()
             }
         };
-        let lumping = match nodes.lumping.as_mut() {
-            Some(l) => (
-                l.mass.as_mut_ptr(),
-                l.momentum.as_mut_ptr(),
-                l.body_force.as_mut_ptr(),
-            ),
-            None => (
-                std::ptr::null_mut(),
-                std::ptr::null_mut(),
-                std::ptr::null_mut(),
-            ),
-        };
         NodeScatter {
             mass: nodes.mass.as_mut_ptr(),
             momentum: nodes.momentum.as_mut_ptr(),
             force: nodes.force.as_mut_ptr(),
             mass_gradient: opt(&mut nodes.mass_gradient),
             body_force: opt(&mut nodes.body_force),
-            lumping,
             touched: nodes.touched.as_mut_ptr(),
             slot: &nodes.slot,
             len: nodes.mass.len(),
@@ -614,24 +596,19 @@ pub unsafe fn scatter_add<T: std::ops::AddAssign>(field: *mut T, n: usize, value
     *field.add(n) += value;
 }
 
-/// Per-node `Σ_p m_p (L_I − Ψ_I)` times 1, the mapped velocity and the body acceleration (the
-/// body force `Σ_p m_p Ψ_I b_p` itself is `GridNodes::body_force`).
+/// Per-node sums of signed shape functions' nonnegative lumping (`step::edge_lumping`).
 #[derive(Debug, Default, Clone)]
-pub struct LumpingShift<const D: usize> {
+pub struct EdgeLumping {
+    /// `Σ_p m_p L_I(x_p)`.
     pub mass: Vec<f64>,
-    pub momentum: Vec<Vector<D>>,
-    pub body_force: Vec<Vector<D>>,
-    /// `θ` of each node, set by the first grid update of a step and reused by the second map of
-    /// MUSL.
+    /// `θ` of each node ([`EdgeLumping::blend`]).
     pub blend: Vec<f64>,
 }
 
-impl<const D: usize> LumpingShift<D> {
+impl EdgeLumping {
     fn new(n: usize) -> std::result::Result<Self, std::collections::TryReserveError> {
-        Ok(LumpingShift {
+        Ok(EdgeLumping {
             mass: filled(n, 0.0)?,
-            momentum: filled(n, Vector::zeros())?,
-            body_force: filled(n, Vector::zeros())?,
             blend: filled(n, 1.0)?,
         })
     }

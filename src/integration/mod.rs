@@ -49,7 +49,7 @@ pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
 use crate::grid::{Grid, GridNodes, NodeScatter, SharedSlice};
-use crate::shape::{Monomials, StencilNode, StencilView, Stencils};
+use crate::shape::{Monomials, StencilNode, Stencils};
 use crate::step::Bins;
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
@@ -177,7 +177,7 @@ impl<const D: usize> VcCorrection<D> {
         {
             let out = NodeScatter::new(nodes);
             by_colour(&|p| {
-                stencils.for_each(p, |_, s| {
+                stencils.for_each_shape(p, |_, s| {
                     if in_support(&s) {
                         // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                         unsafe { out.touch(s.node) }
@@ -213,7 +213,7 @@ impl<const D: usize> VcCorrection<D> {
             by_colour(&|p| {
                 let (mut q, mut dq) = ([0.0; MAX_BASIS], [0.0; 3 * MAX_BASIS]);
                 let v = volumes[p];
-                stencils.for_each(p, |_, s| {
+                stencils.for_each_shape(p, |_, s| {
                     if !in_support(&s) {
                         return;
                     }
@@ -366,7 +366,7 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 let mut q = [0.0; MAX_BASIS];
                 let mut weight = 0.0;
-                stencils.for_each(p, |_, s| {
+                stencils.for_each_shape(p, |_, s| {
                     if !in_support(&s) {
                         return;
                     }
@@ -404,7 +404,7 @@ impl<const D: usize> VcCorrection<D> {
                             continue;
                         }
                         let v = volumes[p];
-                        stencils.for_each(p, |_, s| {
+                        stencils.for_each_shape(p, |_, s| {
                             if !in_support(&s) {
                                 return;
                             }
@@ -437,7 +437,7 @@ impl<const D: usize> VcCorrection<D> {
         // surface up to round-off) is removed, so that the solve does not amplify it.
         let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
             if counted(p) {
-                stencils.for_each(p, |_, s| {
+                stencils.for_each_shape(p, |_, s| {
                     if in_support(&s) {
                         visit(nodes.slot(s.node));
                     }

@@ -185,6 +185,9 @@ pub struct Stencils<const D: usize> {
     /// Nonnegative lumping weights (same layout as `values`), only for signed shape functions;
     /// empty otherwise.
     pub lumping: Vec<f64>,
+    /// The transfer weights of signed shape functions (`step::edge_lumping`), which
+    /// [`StencilView::for_each`] gives in place of `values` when they are set; empty otherwise.
+    pub transfer: Vec<f64>,
 }
 
 impl<const D: usize> Stencils<D> {
@@ -202,6 +205,7 @@ impl<const D: usize> Stencils<D> {
             .zip(self.gradients.par_chunks_mut(len))
             .zip(x.par_iter())
             .for_each(|(((n, w), g), xp)| shape.evaluate(grid, xp, n, w, g));
+        self.transfer.clear();
         if shape.is_signed() {
             self.lumping.resize(total, 0.0);
             self.lumping
@@ -230,10 +234,37 @@ impl<const D: usize> Stencils<D> {
         )
     }
 
+    /// Calls `f(s, node)` for every slot `s` of the stencil of particle `p` with the shape
+    /// function's own values `Ψ` (where [`StencilView::for_each`] gives the transfer weights).
+    #[inline(always)]
+    pub fn for_each_shape(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
+        self.visit(p, &self.values, f)
+    }
+
+    #[inline(always)]
+    fn visit(&self, p: usize, values: &[f64], mut f: impl FnMut(usize, StencilNode<D>)) {
+        let r = p * self.len..(p + 1) * self.len;
+        let (ns, ws, gs) = (
+            &self.nodes[r.clone()],
+            &values[r.clone()],
+            &self.gradients[r],
+        );
+        for s in 0..ns.len() {
+            f(
+                s,
+                StencilNode {
+                    node: ns[s],
+                    value: ws[s],
+                    gradient: gs[s],
+                },
+            );
+        }
+    }
+
     /// Bytes allocated.
     pub fn bytes(&self) -> usize {
         self.nodes.capacity() * std::mem::size_of::<usize>()
-            + (self.values.capacity() + self.lumping.capacity()) * 8
+            + (self.values.capacity() + self.lumping.capacity() + self.transfer.capacity()) * 8
             + self.gradients.capacity() * std::mem::size_of::<Vector<D>>()
     }
 }
@@ -246,18 +277,12 @@ impl<const D: usize> StencilView<D> for Stencils<D> {
         self
     }
 
+    /// The transfer weights when they are set, else `Ψ`.
     #[inline(always)]
-    fn for_each(&self, p: usize, mut f: impl FnMut(usize, StencilNode<D>)) {
-        let (ns, ws, gs) = self.of(p);
-        for s in 0..ns.len() {
-            f(
-                s,
-                StencilNode {
-                    node: ns[s],
-                    value: ws[s],
-                    gradient: gs[s],
-                },
-            );
+    fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
+        match self.transfer.is_empty() {
+            true => self.visit(p, &self.values, f),
+            false => self.visit(p, &self.transfer, f),
         }
     }
 

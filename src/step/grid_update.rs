@@ -1,7 +1,7 @@
 //! Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` with the wall conditions.
 
 use crate::boundary::Walls;
-use crate::grid::{Grid, GridNodes, LumpingShift, SharedSlice};
+use crate::grid::{Grid, GridNodes, SharedSlice};
 use crate::Vector;
 use rayon::prelude::*;
 
@@ -25,12 +25,8 @@ const EDGE_MASS_FRACTION: f64 = 1e-2;
 /// `velocity = (mv)/m`. Nodes with mass at or below `mass_floor` get zero velocity; nothing is
 /// divided by a negligible mass.
 ///
-/// With a lumping shift (signed shape functions), each node's mass, momentum and body force are
-/// `(1 − θ)` of the way from the `Ψ` sums to the nonnegative-lumping sums, with `θ` from
-/// [`LumpingShift::blend`] (1 inside a body, so nothing changes there).
-///
 /// `no_force`: nothing was mapped to `force` (MLS without tractions, whose forces ride on the
-/// momentum). Without a lumping shift or a body force kept apart, the velocity is then
+/// momentum). Without a body force kept apart, the velocity is then
 /// `(mv)/m + 0` (the same bits as the whole expression with zero forces: adding `+0` turns a
 /// `−0` into `+0`, as adding the zero forces does) and `velocity_old`, which only FLIP reads,
 /// is left at zero: two divisions less per node.
@@ -64,7 +60,6 @@ pub fn grid_update<const D: usize>(
         force,
         velocity_old,
         velocity,
-        lumping,
         body_force,
         active,
         ..
@@ -72,35 +67,16 @@ pub fn grid_update<const D: usize>(
     let (mass, momentum) = (SharedSlice::new(mass), SharedSlice::new(momentum));
     let (velocity_old, velocity) = (SharedSlice::new(velocity_old), SharedSlice::new(velocity));
     let (force, body_force) = (&*force, &*body_force);
-    let lumping = lumping.as_mut().map(|l| {
-        (
-            SharedSlice::new(&mut l.blend),
-            &l.mass,
-            SharedSlice::new(&mut l.momentum),
-            &l.body_force,
-        )
-    });
-    let momentum_only = no_force && lumping.is_none() && body_force.is_empty();
+    let momentum_only = no_force && body_force.is_empty();
     active.par_iter().for_each(|&n| {
         // SAFETY: `active` lists each node once, so every node is written by one task only.
         let (m, p) = unsafe { (mass.at(n), momentum.at(n)) };
-        // Body force apart from the internal force under lumping (it is limited by the mass
-        // floor only in the internal part, so that a uniform gravity stays exact).
-        let mut body = Vector::<D>::zeros();
-        if let Some((blend, l_mass, l_momentum, l_body)) = &lumping {
-            let blend = unsafe { blend.at(n) };
-            if dt.is_some() {
-                *blend = LumpingShift::<D>::blend(*m, *m + l_mass[n]);
-            }
-            let rest = 1.0 - *blend;
-            *p += rest * unsafe { *l_momentum.at(n) };
-            if dt.is_some() {
-                *m += rest * l_mass[n];
-                body = body_force[n] + rest * l_body[n];
-            }
-        } else if dt.is_some() && !body_force.is_empty() {
-            body = body_force[n];
-        }
+        // Body force apart from the internal force (the mass floor limits only the internal
+        // part, so that a uniform gravity stays exact).
+        let body = match dt {
+            Some(_) if !body_force.is_empty() => body_force[n],
+            _ => Vector::<D>::zeros(),
+        };
         let (v_old, v) = unsafe { (velocity_old.at(n), velocity.at(n)) };
         if *m <= mass_floor {
             *v = Vector::zeros();
@@ -116,10 +92,11 @@ pub fn grid_update<const D: usize>(
             None => *v = *p / *m,
         }
     });
-    // The force the edge-mass floor held back, handed to the whole field as one acceleration
-    // (mass-weighted), so that the field's momentum still changes by Σ f Δt; with walls, which
-    // take momentum anyway and must not be pushed through, it is dropped. Sums in node order:
-    // the same bits with any number of threads.
+    // The force the edge-mass floor held back, and the momentum and forces of the nodes at or
+    // below the mass floor (which get no velocity), handed to the whole field as one
+    // acceleration (mass-weighted), so that the field's momentum still changes by Σ f Δt; with
+    // walls, which take momentum anyway and must not be pushed through, they are dropped. Sums
+    // in node order: the same bits with any number of threads.
     if let (Some(dt), true) = (dt, force_mass_floor > 0.0 && !walls.any_wall()) {
         let (mut held, mut total) = (Vector::<D>::zeros(), 0.0);
         for &n in &nodes.active {
@@ -128,6 +105,11 @@ pub fn grid_update<const D: usize>(
                 total += m;
                 if m < force_mass_floor {
                     held += nodes.force[n] * (1.0 - m / force_mass_floor);
+                }
+            } else {
+                held += nodes.force[n] + nodes.momentum[n] / dt;
+                if !nodes.body_force.is_empty() {
+                    held += nodes.body_force[n];
                 }
             }
         }

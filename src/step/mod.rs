@@ -20,6 +20,7 @@
 //! [`PhaseTimes`] accumulates the time per phase.
 
 mod bins;
+mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
 mod particle_to_grid;
@@ -360,11 +361,35 @@ impl<const D: usize> Sim<D> {
                 self.work.times.bins += lap(&mut clock);
                 let mut stencils = std::mem::take(&mut self.work.stencils);
                 stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);
+                if self.shape.is_signed() {
+                    self.blend_transfer_weights(&mut stencils);
+                }
                 self.work.times.shape += lap(&mut clock);
                 let result = self.phases(dt, &stencils, Some(&stencils));
                 self.work.stencils = stencils;
                 result
             }
+        }
+    }
+
+    /// Signed shape functions: the stencils' transfer weights ([`edge_lumping`]), per body
+    /// under contact.
+    fn blend_transfer_weights(&mut self, stencils: &mut Stencils<D>) {
+        let (grid, walls, ps) = (&self.grid, &self.options.walls, &self.particles);
+        let work = &mut self.work;
+        if self.options.contact.is_some() {
+            for (b, nodes) in work.bodies.iter_mut().enumerate() {
+                edge_lumping::blend_transfer_weights(
+                    grid,
+                    walls,
+                    ps,
+                    Some(b as u32),
+                    stencils,
+                    nodes,
+                );
+            }
+        } else {
+            edge_lumping::blend_transfer_weights(grid, walls, ps, None, stencils, &mut work.nodes);
         }
     }
 
@@ -654,9 +679,6 @@ impl<const D: usize> Sim<D> {
             // those grid velocities.
             for &n in &work.nodes.active {
                 work.nodes.momentum[n] = Vector::zeros();
-                if let Some(l) = work.nodes.lumping.as_mut() {
-                    l.momentum[n] = Vector::zeros();
-                }
             }
             let v = &new.velocity[..];
             let velocity = move |p: usize| v[p];
@@ -665,7 +687,7 @@ impl<const D: usize> Sim<D> {
                 ps,
                 &work.bins,
                 stencils,
-                stored,
+                None,
                 velocity,
                 plan.apic.then_some({
                     let c = &new.affine[..];

@@ -1,9 +1,9 @@
 //! Particle to grid: `m_I = Σ m_p Ψ_Ip`, `(mv)_I = Σ m_p Ψ_Ip (v_p + C_p (x_I − x_p))`,
 //! `f_I = −Σ V_p σ_p ∇Ψ_Ip + Σ m_p Ψ_Ip b_p`.
 //!
-//! For a signed shape function (RK of order ≥ 2) the same sums with the nonnegative lumping
-//! weights `L_I` are kept as shifts `Σ m_p (L_Ip − Ψ_Ip)(1, v_p, b_p)`, which the grid update
-//! blends in at nodes that barely overlap a body.
+//! For a signed shape function (RK of order ≥ 2) the stencils give the transfer weights of
+//! [`super::edge_lumping`] (`Ψ` inside a body); the force takes the gradients `∇Ψ` and VC's
+//! correction is weighted with `Ψ`, as VC computed it.
 
 use super::bins::Bins;
 use crate::grid::{scatter_add, NodeScatter};
@@ -29,6 +29,8 @@ pub struct Forces<'a, const D: usize> {
 
 /// Scatters particle quantities to the nodes of their stencils and marks those nodes active.
 ///
+/// * `shape`: the stored stencils, whose values `Ψ` weigh VC's correction where the transfer
+///   weights differ from them (signed shape functions).
 /// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
 ///   particle's own, or the updated ones in the second map of MUSL).
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
@@ -48,7 +50,7 @@ pub fn particle_to_grid<const D: usize, S, A>(
     ps: &Particles<D>,
     bins: &Bins<D>,
     stencils: &S,
-    lumping: Option<&Stencils<D>>,
+    shape: Option<&Stencils<D>>,
     velocity: impl Fn(usize) -> Vector<D> + Sync + Copy,
     affine: Option<A>,
     forces: Option<Forces<D>>,
@@ -63,7 +65,6 @@ where
     let out = NodeScatter::new(nodes);
     let with_gradient = !out.mass_gradient.is_null() && forces.is_some();
     let keep_body_force = !out.body_force.is_null();
-    let with_lumping = !out.lumping.0.is_null();
     let with_mass = forces.is_some();
     let mls = forces.and_then(|f| f.mls);
     // No body-force sums when there is no gravity and no body-force callback (nor under MLS,
@@ -90,9 +91,6 @@ where
             if body.is_some_and(|b| material[p] != b) {
                 return;
             }
-            let lumping = lumping
-                .and_then(|l| l.lumping_of(p))
-                .filter(|_| with_lumping);
             let m = mass[p];
             let v = velocity(p);
             let c = affine.as_ref().map(|a| a(p));
@@ -114,14 +112,16 @@ where
                 mc = mc.map(|mc| mc + (dt * inverse_inertia) * vs);
                 force = None;
             }
+            let psi = shape
+                .filter(|s| !s.transfer.is_empty())
+                .map(|s| &s.values[p * s.len..(p + 1) * s.len]);
             let node_sums = |s: usize, node: StencilNode<D>, offset: Vector<D>| {
                 let StencilNode {
                     node: n,
                     value: w,
                     gradient: g,
                 } = node;
-                let shift = lumping.map_or(0.0, |l| l[s] - w);
-                if w == 0.0 && shift == 0.0 && g == Vector::<D>::zeros() {
+                if w == 0.0 && g == Vector::<D>::zeros() {
                     return;
                 }
                 // SAFETY: tasks that share nodes never run at once (`Bins::run_tasks`).
@@ -132,15 +132,6 @@ where
                         momentum += mc * offset;
                     }
                     scatter_add(out.momentum, n, w * momentum);
-                    if with_lumping {
-                        scatter_add(out.lumping.1, n, shift * momentum);
-                        if let Some((_, b)) = force {
-                            scatter_add(out.lumping.0, n, m * shift);
-                            if with_body_force {
-                                scatter_add(out.lumping.2, n, (m * shift) * b);
-                            }
-                        }
-                    }
                     if with_mass {
                         scatter_add(out.mass, n, m * w);
                         if with_gradient {
@@ -150,7 +141,8 @@ where
                     if let Some((vs, b)) = force {
                         let grad = match vc {
                             Some(vc) if w != 0.0 || g != Vector::<D>::zeros() => {
-                                g + vc.gradient_correction_at(grid, out.slot[n], n, p, &xp, w)
+                                let psi = psi.map_or(w, |psi| psi[s]);
+                                g + vc.gradient_correction_at(grid, out.slot[n], n, p, &xp, psi)
                             }
                             _ => g,
                         };
@@ -165,7 +157,7 @@ where
                     }
                 }
             };
-            // A factored scatter when the stencils have one (B-spline factors; no VC, no lumping).
+            // A factored scatter when the stencils have one (B-spline factors; no VC).
             let input = ScatterInput {
                 position: xp,
                 mass: m,
@@ -178,7 +170,7 @@ where
                 with_gradient,
             };
             // SAFETY: as above.
-            if vc.is_none() && lumping.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
+            if vc.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
                 return;
             }
             stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
