@@ -4,13 +4,19 @@
 //! against run time).
 //!
 //! ```text
-//! cargo run --release --example convergence            # the full study (about 10 minutes on 2 cores)
+//! cargo run --release --example convergence            # the full study
 //! cargo run --release --example convergence -- --quick # coarser grids, for a look
+//! cargo run --release --example convergence -- --placed # only the particles off the Gauss points
 //! ```
+//!
+//! The particles off the Gauss points (quarter points; jittered by ±30 %, three seeds) go to
+//! `docs/convergence/placed.md` and `placed_l2.png`: the cases where VC has something to
+//! correct.
 
 use plotters::prelude::*;
 use rkmpm::verification::{
-    fitted_slope, run_mms, AxisAlignedMms, ColumnRun, MmsRun, SelfWeightColumn,
+    fitted_slope, run_mms, run_mms_placed, AxisAlignedMms, ColumnRun, MmsRun, Placement,
+    SelfWeightColumn, Surface,
 };
 use rkmpm::{Integration, Shape, Transfer};
 use std::fmt::Write as _;
@@ -115,6 +121,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )
     .map_err(|_| "font")?;
 
+    placed_study(&out, quick)?;
+    if std::env::args().any(|a| a == "--placed") {
+        return Ok(());
+    }
     let mms = AxisAlignedMms::default();
     let t_end = 0.015; // three quarters of the period 2/c, where |u| is largest again
     let cfl = 0.3;
@@ -195,6 +205,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if quick { " -- --quick" } else { "" }
     )?;
     writeln!(md, "Axis-aligned neo-Hookean solution `u_a = A sin(2πX_a) sin(cπt + aπ)`, E = 1e7 Pa, ν = 0.3, ρ0 = 1000 kg/m³, A = 0.01 m, unit square (cube) with slip walls, 2 particles per cell per direction at the two-point Gauss abscissae, CFL {cfl}, errors at t = {t_end} s (three quarters of a period) over particles: displacement L2 and deformation-gradient (energy-norm) errors relative to the exact fields.\n")?;
+    writeln!(
+        md,
+        "With the particles off the Gauss points (quarter points, jittered): [placed.md](placed.md).\n"
+    )?;
     for dim in [2usize, 3] {
         writeln!(md, "## {dim}D\n")?;
         writeln!(
@@ -411,7 +425,37 @@ fn plot(
             (m.name, pts)
         })
         .collect();
-    let all: Vec<(f64, f64)> = series.iter().flat_map(|s| s.1.iter().copied()).collect();
+    let series: Vec<Series> = series
+        .into_iter()
+        .enumerate()
+        .map(|(i, (name, pts))| (name.to_string(), COLORS[i % COLORS.len()], pts))
+        .collect();
+    let caption = format!(
+        "{dim}D manufactured solution: {what} against {}",
+        if x_time { "run time" } else { "h" }
+    );
+    let xlabel = if x_time {
+        "run time (s)"
+    } else {
+        "cell size h"
+    };
+    draw_loglog(&series, &caption, xlabel, what, path, !x_time)
+}
+
+/// A named line of points in a log-log plot, with its colour.
+type Series = (String, RGBColor, Vec<(f64, f64)>);
+
+/// Draws `series` on log-log axes into `path`, with reference slopes 1, 2 and 3 through the
+/// coarsest point of the first series when `slopes` is set.
+fn draw_loglog(
+    series: &[Series],
+    caption: &str,
+    xlabel: &str,
+    ylabel: &str,
+    path: &Path,
+    slopes: bool,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let all: Vec<(f64, f64)> = series.iter().flat_map(|s| s.2.iter().copied()).collect();
     if all.is_empty() {
         return Ok(());
     }
@@ -423,19 +467,8 @@ fn plot(
         .fold((f64::MAX, f64::MIN), |a, p| (a.0.min(p.1), a.1.max(p.1)));
     let root = BitMapBackend::new(path, (900, 650)).into_drawing_area();
     root.fill(&WHITE)?;
-    let xlabel = if x_time {
-        "run time (s)"
-    } else {
-        "cell size h"
-    };
     let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "{dim}D manufactured solution: {what} against {}",
-                if x_time { "run time" } else { "h" }
-            ),
-            ("sans-serif", 22),
-        )
+        .caption(caption, ("sans-serif", 22))
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(70)
@@ -446,21 +479,21 @@ fn plot(
     chart
         .configure_mesh()
         .x_desc(xlabel)
-        .y_desc(what)
+        .y_desc(ylabel)
         .x_label_formatter(&|v| format!("{v:.2e}"))
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()?;
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let c = COLORS[i % COLORS.len()];
+    for (name, c, pts) in series {
+        let c = *c;
         chart
             .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
-            .label(*name)
+            .label(name.as_str())
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
     }
-    if !x_time {
+    if slopes {
         // Reference slopes 1, 2 and 3 through the coarsest point of the first series.
-        if let Some(&(x0, y0)) = series[0].1.first() {
+        if let Some(&(x0, y0)) = series[0].2.first() {
             for (k, style) in [
                 (1.0, BLACK.mix(0.3)),
                 (2.0, BLACK.mix(0.5)),
@@ -482,6 +515,136 @@ fn plot(
         .draw()?;
     root.present()?;
     Ok(())
+}
+
+/// The 2D manufactured solution with the particles off the Gauss points, at the quarter points
+/// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the cubic B-spline with
+/// material-point integration and RK1 + VC1 with the surface found from the particles (what a
+/// user who gives no boundary points gets). Writes `placed.md` (table, band over the seeds,
+/// slopes) and `placed_l2.png`.
+fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error>> {
+    let grids: &[usize] = if quick {
+        &[8, 16, 32]
+    } else {
+        &[8, 16, 32, 64]
+    };
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let methods = [
+        (
+            "cubic B-spline",
+            Shape::BSpline3,
+            Integration::MaterialPoint,
+        ),
+        ("RK1 + VC1", rk1, Integration::Vc { order: 1 }),
+    ];
+    let jitter = |seed| Placement::Jittered {
+        fraction: 0.3,
+        seed,
+    };
+    let placements = [
+        ("quarter points", vec![Placement::Uniform]),
+        ("jittered ±30 %", vec![jitter(1), jitter(2), jitter(3)]),
+    ];
+    let mms = AxisAlignedMms::default();
+    let mut md = String::from("# Convergence off the Gauss points (2D manufactured solution)\n\n");
+    writeln!(
+        md,
+        "Generated by `cargo run --release --example convergence -- --placed`{}; do not edit by \
+         hand. The study's problem (see `README.md` here), 2 particles per cell per direction at \
+         the quarter points of each cell, or moved from there by a uniform random amount of up to \
+         ±30 % of their spacing per direction (seeds 1, 2, 3: the band is the smallest and largest \
+         error over them). APIC; RK1 + VC1 with the surface found from the particles.\n",
+        if quick { " --quick" } else { "" }
+    )?;
+    writeln!(
+        md,
+        "| particles | method | cells | L2 error | energy error | run time (s), each |\n|---|---|---|---|---|---|"
+    )?;
+    let mut slopes = String::from(
+        "\n| particles | method | fitted L2 slope over the last three grids, each seed |\n|---|---|---|\n",
+    );
+    let mut series: Vec<Series> = Vec::new();
+    for (k, (pname, list)) in placements.iter().enumerate() {
+        for (j, &(mname, shape, integration)) in methods.iter().enumerate() {
+            let colour = COLORS[(2 * k + j) % COLORS.len()];
+            let mut l2 = vec![Vec::new(); list.len()];
+            for &cells in grids {
+                let mut errors = Vec::new();
+                for (s, &placement) in list.iter().enumerate() {
+                    let run = run_mms_placed::<2>(
+                        &mms,
+                        cells,
+                        2,
+                        placement,
+                        Surface::Found,
+                        shape,
+                        integration,
+                        Transfer::Apic,
+                        0.015,
+                        0.3,
+                    )?;
+                    eprintln!(
+                        "{pname}, {mname}, {cells} cells, #{s}: L2 {:.3e}  energy {:.3e}  {:.1} s",
+                        run.errors.l2, run.errors.energy, run.seconds
+                    );
+                    l2[s].push(run.errors.l2);
+                    errors.push(run);
+                }
+                let band = |f: &dyn Fn(&MmsRun) -> f64| {
+                    let (lo, hi) = errors
+                        .iter()
+                        .map(f)
+                        .fold((f64::MAX, f64::MIN), |a, e| (a.0.min(e), a.1.max(e)));
+                    if lo == hi {
+                        format!("{lo:.3e}")
+                    } else {
+                        format!("{lo:.3e} – {hi:.3e}")
+                    }
+                };
+                let seconds: Vec<String> =
+                    errors.iter().map(|r| format!("{:.1}", r.seconds)).collect();
+                writeln!(
+                    md,
+                    "| {pname} | {mname} | {cells} | {} | {} | {} |",
+                    band(&|r| r.errors.l2),
+                    band(&|r| r.errors.energy),
+                    seconds.join(", ")
+                )?;
+            }
+            let h: Vec<f64> = grids.iter().map(|&c| 1.0 / c as f64).collect();
+            let last = h.len().saturating_sub(3);
+            let fitted: Vec<String> = l2
+                .iter()
+                .map(|e| format!("{:.2}", fitted_slope(&h[last..], &e[last..])))
+                .collect();
+            writeln!(slopes, "| {pname} | {mname} | {} |", fitted.join(", "))?;
+            for (s, e) in l2.iter().enumerate() {
+                let name = match list.len() {
+                    1 => format!("{mname}, {pname}"),
+                    _ => format!("{mname}, {pname}, seed {}", s + 1),
+                };
+                series.push((
+                    name,
+                    colour,
+                    h.iter().copied().zip(e.iter().copied()).collect(),
+                ));
+            }
+        }
+    }
+    md.push_str(&slopes);
+    writeln!(md, "\n![L2 error against h](placed_l2.png)")?;
+    std::fs::write(out.join("placed.md"), md)?;
+    draw_loglog(
+        &series,
+        "2D manufactured solution off the Gauss points: L2 error against h",
+        "cell size h",
+        "L2 error",
+        &out.join("placed_l2.png"),
+        true,
+    )
 }
 
 /// The nearly incompressible column (ν = 0.49) with jittered particles: pressure against the exact
