@@ -39,7 +39,7 @@ pub fn blend_transfer_weights<const D: usize>(
     // Both masses of every node, in particle order (the same sums with any number of threads).
     for p in (0..ps.len()).filter(|&p| member(p)) {
         let (ns, ws, _) = stencils.of(p);
-        let ls = &stencils.lumping[p * stencils.len..(p + 1) * stencils.len];
+        let ls = stencils.lumping_of(p).expect("checked above");
         let m = ps.mass[p];
         for s in 0..ns.len() {
             nodes.touch(ns[s]);
