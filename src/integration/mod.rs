@@ -67,6 +67,9 @@ pub(crate) const VC_SOLVE_TOLERANCE: f64 = 1e-12;
 /// At most this many conjugate-gradient iterations per step.
 pub(crate) const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
 
+/// At most this many restarts of the solve from its best iterate after a breakdown.
+pub(crate) const VC_SOLVE_MAX_RESTARTS: usize = 5;
+
 /// The largest correction a node takes, in units of `1/h` (the norm of its coefficients `ζ_I`,
 /// written in `(x − x_I)/h`). A node that the particles barely reach while a surface point sees
 /// it has an equality the particles can meet only with a large coefficient on almost no mass.
@@ -448,6 +451,10 @@ impl<const D: usize> VcCorrection<D> {
         // Started from zero (a start from the last step's coefficients would save iterations
         // but tie the step to a history that a checkpoint does not hold), stopping when the
         // preconditioned residual has fallen to `VC_SOLVE_TOLERANCE` of the right-hand side's.
+        // Near a free surface the system is badly conditioned (nodes the particles barely
+        // reach), and conjugate gradients can lose positive curvature to round-off (`dᵀKd ≤ 0`)
+        // or let the residual grow: the solve then restarts from its best iterate with the
+        // true residual, and returns the iterate of smallest residual, never a later, worse one.
         let mut zeta = vec![0.0; len];
         let mut r = rhs.clone();
         let mut z = vec![0.0; len];
@@ -456,12 +463,26 @@ impl<const D: usize> VcCorrection<D> {
         let mut kd = vec![0.0; len];
         let mut rz = dot(&r, &z);
         let target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * rz;
-        let mut iterations = 0;
+        let (mut best, mut best_rz) = (zeta.clone(), rz);
+        let (mut iterations, mut restarts) = (0, 0);
         while rz > target && iterations < VC_SOLVE_MAX_ITERATIONS {
             apply(&d, &mut kd, &mut mean);
             let dkd = dot(&d, &kd);
-            if dkd <= 0.0 {
-                break;
+            if dkd.is_nan() || dkd <= 0.0 {
+                if restarts == VC_SOLVE_MAX_RESTARTS {
+                    break;
+                }
+                restarts += 1;
+                zeta.copy_from_slice(&best);
+                apply(&zeta, &mut kd, &mut mean);
+                r.par_iter_mut()
+                    .zip(&rhs)
+                    .zip(&kd)
+                    .for_each(|((r, b), kz)| *r = b - kz);
+                precondition(&r, &mut z);
+                d.copy_from_slice(&z);
+                rz = dot(&r, &z);
+                continue;
             }
             let alpha = rz / dkd;
             zeta.par_iter_mut()
@@ -472,6 +493,10 @@ impl<const D: usize> VcCorrection<D> {
                 .for_each(|(r, kd)| *r -= alpha * kd);
             precondition(&r, &mut z);
             let rz_new = dot(&r, &z);
+            if rz_new < best_rz {
+                best_rz = rz_new;
+                best.copy_from_slice(&zeta);
+            }
             let beta = rz_new / rz;
             rz = rz_new;
             d.par_iter_mut()
@@ -479,6 +504,7 @@ impl<const D: usize> VcCorrection<D> {
                 .for_each(|(d, z)| *d = z + beta * *d);
             iterations += 1;
         }
+        let mut zeta = best;
         self.iterations = iterations;
         // At order 1, a node's correction bounded by `VC_MAX_CORRECTION / h` (see there); the
         // means are taken of the bounded coefficients, so the gradients still sum to zero.
