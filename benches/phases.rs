@@ -116,9 +116,9 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
 
     // Binning, then the transfers with the quadratic B-spline.
     let mut bins = Bins::<D>::default();
-    bins.compute(&quadratic, &grid, &ps.position);
+    rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, &ps.position);
     g.bench_function("bins", |b| {
-        b.iter(|| bins.compute(&quadratic, &grid, &ps.position))
+        b.iter(|| rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, &ps.position))
     });
     let mut nodes = GridNodes::<D>::default();
     nodes.ensure(&grid, false, false, false).unwrap();

@@ -30,13 +30,6 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
- * How far the gate reaches above the column's top at the start, and how far above it the lifted
- * gate is held, in cells: beyond the reach of every shape function here (support radius up to
- * 2 cells on either side), so the gate's ends never share a grid node with the column's top.
- */
-#define GATE_CLEARANCE 5.0
-
-/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */

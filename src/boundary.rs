@@ -16,25 +16,7 @@ use crate::error::{check_finite, Error, Result};
 use crate::grid::{DomainBox, Grid, GridNodes};
 use crate::Vector;
 
-/// The condition on one face of the grid.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Boundary {
-    #[default]
-    Free,
-    /// No velocity on the face (no-slip).
-    Fixed,
-    /// No normal velocity on the face (roller), tangential motion free.
-    Slip,
-    /// Unilateral contact with Coulomb friction coefficient `μ ≥ 0`.
-    Friction(f64),
-}
-
-/// Which face of an axis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Side {
-    Low = 0,
-    High = 1,
-}
+pub use crate::options::{Boundary, Side, WallKind, Walls};
 
 impl Side {
     pub fn from_sign(side: i32) -> Result<Side> {
@@ -76,20 +58,6 @@ impl Boundary {
 
     fn reflect<const D: usize>(&self, axis: usize, v: &Vector<D>) -> Vector<D> {
         Vector::<D>::from_fn(|c, _| self.sign(axis, c) * v[c])
-    }
-}
-
-/// The conditions on all `2 D` faces.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Walls<const D: usize> {
-    pub faces: [[Boundary; 2]; D],
-}
-
-impl<const D: usize> Default for Walls<D> {
-    fn default() -> Self {
-        Walls {
-            faces: [[Boundary::Free; 2]; D],
-        }
     }
 }
 

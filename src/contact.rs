@@ -23,12 +23,7 @@
 use crate::grid::GridNodes;
 use crate::Vector;
 
-/// Contact options.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Contact {
-    /// Coulomb friction coefficient `μ ≥ 0` between bodies.
-    pub friction: f64,
-}
+pub use crate::options::Contact;
 
 /// Applies the contact correction to the updated velocities of the per-body node fields, at
 /// every node that more than one body touched. `rigid[b]` is the prescribed velocity of body `b`

@@ -8,7 +8,8 @@
 //! grid to particle → constitutive update → grid reset. USL and MUSL are selectable,
 //! with a PIC/FLIP blend or APIC transfer.
 //!
-//! The C API (`include/rkmpm.h`) is a thin layer over this crate in [`ffi`]; all `unsafe` lives there.
+//! The C API (`include/rkmpm.h`) is a thin layer over this crate in [`ffi`]. Options are declared
+//! once, in [`options`], for the Rust API, the C API, scene files and checkpoints.
 //!
 //! ```
 //! use rkmpm::{Sim, Shape, Material};
@@ -30,6 +31,7 @@ pub mod grid;
 pub mod integration;
 pub mod io;
 pub mod material;
+pub mod options;
 pub mod particles;
 pub mod scene;
 pub mod scenes;

@@ -7,6 +7,7 @@
 
 use crate::material::PlasticState;
 use crate::{Matrix, Vector};
+use num_enum::{IntoPrimitive, TryFromPrimitive};
 use rayon::prelude::*;
 
 /// Per-particle quantities. All vectors have the same length (the particle count), except
@@ -61,31 +62,33 @@ impl<const D: usize> SpareArrays<D> {
     }
 }
 
-/// A particle quantity that can be read out, with its layout.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A particle quantity that can be read out, with its layout; the discriminants are the C API's
+/// codes (`RKMPM_FIELD_*`).
+#[repr(u32)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, TryFromPrimitive, IntoPrimitive)]
 pub enum Field {
     /// `dim` values per particle.
-    Position,
+    Position = 0,
     /// `dim` values per particle.
-    Velocity,
+    Velocity = 1,
     /// `dim` values per particle, `x_p − X_p`.
-    Displacement,
+    Displacement = 2,
     /// `dim * dim` values per particle, row-major Cauchy stress.
-    Stress,
+    Stress = 3,
     /// One value per particle.
-    Pressure,
+    Pressure = 4,
     /// One value per particle, current volume `det(F) V0`.
-    Volume,
+    Volume = 5,
     /// One value per particle.
-    Mass,
+    Mass = 6,
     /// `dim` values per particle, `X_p`.
-    ReferencePosition,
+    ReferencePosition = 7,
     /// `dim * dim` values per particle, row-major `F_p`.
-    DeformationGradient,
+    DeformationGradient = 8,
     /// One value per particle, equivalent plastic strain (0 for elastic materials).
-    PlasticStrain,
+    PlasticStrain = 9,
     /// One value per particle, damage in [0, 1] (Johnson–Cook; 0 for other materials).
-    Damage,
+    Damage = 10,
 }
 
 impl Field {

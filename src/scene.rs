@@ -30,11 +30,13 @@
 //!
 //! `docs/SCENES.md` lists every key.
 
-use crate::boundary::{Boundary, Side};
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{JohnsonCookParameters, Material, MieGruneisen};
-use crate::shape::Shape;
-use crate::sim::{Integration, Scheme, Sim, Transfer};
+use crate::options::{
+    Boundary, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind,
+    WallKind,
+};
+use crate::sim::Sim;
 use crate::Vector;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -72,61 +74,26 @@ pub struct GridSpec {
     pub cell_size: f64,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum ShapeName {
-    Linear,
-    #[default]
-    Bspline2,
-    Bspline3,
-    Rk,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum TransferName {
-    #[default]
-    Apic,
-    PicFlip,
-    Mls,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum IntegrationName {
-    #[default]
-    MaterialPoint,
-    Vc,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum SchemeName {
-    #[default]
-    Usl,
-    Musl,
-}
-
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptionsSpec {
     #[serde(default)]
-    pub shape: ShapeName,
+    pub shape: ShapeKind,
     #[serde(default = "one")]
     pub rk_order: u32,
     #[serde(default = "two")]
     pub rk_support: f64,
     #[serde(default)]
-    pub integration: IntegrationName,
+    pub integration: IntegrationKind,
     #[serde(default = "one")]
     pub vc_order: u32,
     #[serde(default)]
-    pub transfer: TransferName,
+    pub transfer: TransferKind,
     /// FLIP fraction of the PIC/FLIP blend.
     #[serde(default)]
     pub flip: f64,
     #[serde(default)]
-    pub scheme: SchemeName,
+    pub scheme: Scheme,
     #[serde(default)]
     pub gravity: Option<Vec<f64>>,
     /// Multi-velocity-field contact between materials, with this Coulomb friction.
@@ -137,14 +104,14 @@ pub struct OptionsSpec {
 impl Default for OptionsSpec {
     fn default() -> Self {
         OptionsSpec {
-            shape: ShapeName::default(),
+            shape: ShapeKind::default(),
             rk_order: 1,
             rk_support: 2.0,
-            integration: IntegrationName::default(),
+            integration: IntegrationKind::default(),
             vc_order: 1,
-            transfer: TransferName::default(),
+            transfer: TransferKind::default(),
             flip: 0.0,
-            scheme: SchemeName::default(),
+            scheme: Scheme::default(),
             gravity: None,
             contact_friction: None,
         }
@@ -164,28 +131,12 @@ fn default_ppc() -> usize {
     2
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SideName {
-    Low,
-    High,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum WallKind {
-    Free,
-    Fixed,
-    Slip,
-    Friction,
-}
-
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WallSpec {
     /// 0, 1 or 2 (x, y, z).
     pub axis: usize,
-    pub side: SideName,
+    pub side: Side,
     pub kind: WallKind,
     /// Coulomb coefficient of a `friction` wall.
     #[serde(default)]
@@ -418,32 +369,13 @@ impl Scene {
         let cells: [usize; D] = std::array::from_fn(|a| g.cells[a]);
         let mut sim = Sim::<D>::new(origin, cells, g.cell_size).map_err(context("grid"))?;
         let o = &self.options;
-        let shape = match o.shape {
-            ShapeName::Linear => Shape::Linear,
-            ShapeName::Bspline2 => Shape::BSpline2,
-            ShapeName::Bspline3 => Shape::BSpline3,
-            ShapeName::Rk => Shape::Rk {
-                order: o.rk_order,
-                support: o.rk_support,
-            },
-        };
+        let shape = Shape::from_kind(o.shape, o.rk_order, o.rk_support);
         sim.set_shape(shape).map_err(context("options"))?;
-        sim.set_integration(match o.integration {
-            IntegrationName::MaterialPoint => Integration::MaterialPoint,
-            IntegrationName::Vc => Integration::Vc { order: o.vc_order },
-        })
-        .map_err(context("options"))?;
-        sim.set_transfer(match o.transfer {
-            TransferName::Apic => Transfer::Apic,
-            TransferName::PicFlip => Transfer::PicFlip { flip: o.flip },
-            TransferName::Mls => Transfer::Mls,
-        })
-        .map_err(context("options"))?;
-        sim.set_scheme(match o.scheme {
-            SchemeName::Usl => Scheme::Usl,
-            SchemeName::Musl => Scheme::Musl,
-        })
-        .map_err(context("options"))?;
+        sim.set_integration(Integration::from_kind(o.integration, o.vc_order))
+            .map_err(context("options"))?;
+        sim.set_transfer(Transfer::from_kind(o.transfer, o.flip))
+            .map_err(context("options"))?;
+        sim.set_scheme(o.scheme).map_err(context("options"))?;
         if let Some(g) = &o.gravity {
             sim.set_gravity(vector::<D>("options.gravity", g)?)
                 .map_err(context("options"))?;
@@ -452,17 +384,8 @@ impl Scene {
             sim.set_contact(Some(mu)).map_err(context("options"))?;
         }
         for (k, w) in self.walls.iter().enumerate() {
-            let kind = match w.kind {
-                WallKind::Free => Boundary::Free,
-                WallKind::Fixed => Boundary::Fixed,
-                WallKind::Slip => Boundary::Slip,
-                WallKind::Friction => Boundary::Friction(w.friction),
-            };
-            let side = match w.side {
-                SideName::Low => Side::Low,
-                SideName::High => Side::High,
-            };
-            sim.set_boundary(w.axis, side, kind)
+            let kind = Boundary::from_kind(w.kind, w.friction);
+            sim.set_boundary(w.axis, w.side, kind)
                 .map_err(context(&format!("walls[{k}]")))?;
         }
         let mut ids = Vec::new();
@@ -788,11 +711,11 @@ mod tests {
     #[test]
     fn the_comparison_takes_the_compare_options_and_nothing_else() {
         let scene = Scene::from_toml(BUNDLED[0].1, "disks").unwrap();
-        assert_eq!(scene.options.shape, ShapeName::Rk);
-        assert_eq!(scene.options.integration, IntegrationName::Vc);
+        assert_eq!(scene.options.shape, ShapeKind::Rk);
+        assert_eq!(scene.options.integration, IntegrationKind::Vc);
         let other = scene.comparison().expect("disks has a [compare] table");
-        assert_eq!(other.options.shape, ShapeName::Bspline2);
-        assert_eq!(other.options.integration, IntegrationName::MaterialPoint);
+        assert_eq!(other.options.shape, ShapeKind::Bspline2);
+        assert_eq!(other.options.integration, IntegrationKind::MaterialPoint);
         assert!(other.compare.is_none());
         assert_eq!(other.bodies.len(), scene.bodies.len());
         assert_eq!(other.run.end_time, scene.run.end_time);

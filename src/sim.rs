@@ -1,62 +1,16 @@
 //! The simulation: grid, options, materials, particles, and the safe API that the C layer wraps.
 
-use crate::boundary::{Boundary, Side, Walls};
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
+use crate::options::{Boundary, Shape, Side};
+pub use crate::options::{Integration, Options, Scheme, Transfer};
 use crate::particles::{Field, Particles};
-use crate::shape::{Shape, ShapeFunction};
+use crate::shape::ShapeFunction;
 use crate::step::Workspace;
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
-
-/// How the weak form is integrated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Integration {
-    /// Material-point integration (particles are the quadrature points).
-    #[default]
-    MaterialPoint,
-    /// Variationally consistent integration of the given order (lands with the RK/VC issue).
-    Vc { order: u32 },
-}
-
-/// Particle ↔ grid velocity transfer.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Transfer {
-    /// `v_p ← (1 − α) v_PIC + α v_FLIP` with `α = flip` in `[0, 1]`.
-    PicFlip { flip: f64 },
-    /// Affine particle-in-cell (Jiang et al. 2015).
-    Apic,
-    /// Moving-least-squares MPM (Hu et al. 2018): APIC whose internal force and velocity
-    /// gradient take the MLS gradient `M⁻¹ Ψ_I (x_I − x_p)` in place of `∇Ψ_I`, so the force
-    /// rides on the affine momentum (one scatter of mass and momentum per node, no force sum)
-    /// and the velocity gradient is the affine matrix `C_p`. Quadratic and cubic B-splines only
-    /// (`M = h²/4`, `h²/3`), without VC (else the first step fails with `Unsupported`); the
-    /// transfer of Taichi's and Warp's MPM examples. Faster than APIC (about 1.15× per step in
-    /// 2D, 1.25× in 3D) but less accurate: the MLS gradient is exact for linear fields only, so
-    /// on a smooth solution it converges at about first order where APIC with the B-spline
-    /// gradient reaches second (`docs/convergence`).
-    Mls,
-}
-
-impl Transfer {
-    /// Whether particles keep an affine matrix `C_p` (APIC and MLS).
-    pub fn is_affine(&self) -> bool {
-        matches!(self, Transfer::Apic | Transfer::Mls)
-    }
-}
-
-/// Where the stress update and the second velocity map sit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Scheme {
-    /// Update stress last: the velocity gradient uses the grid velocities of the grid update.
-    #[default]
-    Usl,
-    /// Modified USL (Sulsky 1995): particle momenta are mapped to the grid a second time after the
-    /// particle velocity update, and the velocity gradient uses those grid velocities.
-    Musl,
-}
 
 /// A body-force field, evaluated once per step for all particles at once.
 ///
@@ -91,23 +45,6 @@ where
     }
 }
 
-/// Options of a simulation; the ones marked "before stepping" are fixed by the first step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Options<const D: usize> {
-    /// Before stepping. Default: quadratic B-spline.
-    pub shape: Shape,
-    /// Before stepping. Default: material-point integration.
-    pub integration: Integration,
-    /// Before stepping. Default: APIC.
-    pub transfer: Transfer,
-    /// Before stepping. Default: USL.
-    pub scheme: Scheme,
-    pub gravity: Vector<D>,
-    pub walls: Walls<D>,
-    /// Before stepping. Default: none (one velocity field; bodies stick where they meet).
-    pub contact: Option<crate::contact::Contact>,
-}
-
 /// An explicit MPM simulation in `D` dimensions (2 or 3).
 pub struct Sim<const D: usize> {
     pub(crate) grid: Grid<D>,
@@ -134,20 +71,12 @@ impl<const D: usize> Sim<D> {
             return Err(Error::invalid(format!("dimension must be 2 or 3, got {D}")));
         }
         let mut grid = Grid::new(origin.into(), cells, cell_size)?;
-        let shape_choice = Shape::BSpline2;
-        let shape = shape_choice.build::<D>()?;
+        let options = Options::default();
+        let shape = options.shape.build::<D>()?;
         grid.set_ghost_layers(shape.ghost_layers())?;
         Ok(Sim {
             grid,
-            options: Options {
-                shape: shape_choice,
-                integration: Integration::MaterialPoint,
-                transfer: Transfer::Apic,
-                scheme: Scheme::Usl,
-                gravity: Vector::zeros(),
-                walls: Walls::default(),
-                contact: None,
-            },
+            options,
             shape,
             materials: Vec::new(),
             particles: Particles::default(),
@@ -272,7 +201,7 @@ impl<const D: usize> Sim<D> {
                 return Err(Error::invalid(format!("friction must be >= 0, got {mu}")));
             }
         }
-        self.options.contact = friction.map(|friction| crate::contact::Contact { friction });
+        self.options.contact = friction.map(|friction| crate::options::Contact { friction });
         Ok(())
     }
 

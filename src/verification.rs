@@ -1,11 +1,11 @@
 //! Exact solutions for verification (METHOD.md section 6) and the error measures over particles
 //! (METHOD.md section 4).
 
-use crate::boundary::{Boundary, Side};
 use crate::error::Result;
 use crate::material::Material;
-use crate::shape::{Shape, UniformRng};
-use crate::sim::{Integration, Sim, Transfer};
+use crate::options::{Boundary, Integration, Shape, Side, Transfer};
+use crate::shape::UniformRng;
+use crate::sim::Sim;
 use crate::{Matrix, Vector};
 use std::f64::consts::PI;
 

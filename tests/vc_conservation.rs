@@ -247,7 +247,10 @@ fn vc_conserves_momentum_as_the_default_disks_part() {
         .unwrap()
         .1;
     let scene = rkmpm::scene::Scene::from_toml(text, "disks").unwrap();
-    assert_eq!(scene.options.integration, rkmpm::scene::IntegrationName::Vc);
+    assert_eq!(
+        scene.options.integration,
+        rkmpm::options::IntegrationKind::Vc
+    );
     let rkmpm::scene::SceneSim::D2(mut sim) = scene.build().unwrap() else {
         panic!("disks is a 2D scene");
     };

@@ -103,6 +103,12 @@ pub unsafe fn slice<'a, T>(name: &str, ptr: *const T, len: usize) -> Result<&'a 
     Ok(std::slice::from_raw_parts(ptr, len))
 }
 
+/// The option kind (or field) `K` whose C code is `code`; `RKMPM_ERR_INVALID_ARGUMENT` naming
+/// `name` for a code with no meaning.
+pub fn kind_of<K: TryFrom<u32>>(name: &str, code: u32) -> Result<K, Failure> {
+    K::try_from(code).map_err(|_| unknown_enum(name, code))
+}
+
 /// Fails with `RKMPM_ERR_INVALID_ARGUMENT` for an enum value C passed that has no meaning.
 pub fn unknown_enum(name: &str, value: impl std::fmt::Display) -> Failure {
     Failure::new(

@@ -13,14 +13,13 @@
 pub mod gate;
 pub mod status;
 
-use crate::boundary::{Boundary, Side};
 use crate::io::vtk::{self, VtkSeries};
 use crate::material::Material;
+use crate::options::{Boundary, Integration, Scheme, Shape, Side, Transfer};
 use crate::particles::Field;
-use crate::shape::Shape;
-use crate::sim::{BodyForce, Integration, Scheme, Sim, Transfer};
+use crate::sim::{BodyForce, Sim};
 use crate::Vector;
-use gate::{check_ptr, checked_len, gate, slice, unknown_enum, Failure};
+use gate::{check_ptr, checked_len, gate, kind_of, slice, Failure};
 pub use status::RkmpmStatus;
 use std::ffi::{c_char, c_void, CStr};
 use RkmpmStatus::*;
@@ -102,6 +101,39 @@ pub const RKMPM_FIELD_DEFORMATION_GRADIENT: RkmpmField = 8;
 pub const RKMPM_FIELD_PLASTIC_STRAIN: RkmpmField = 9;
 /// 1 value: damage in [0, 1] (Johnson–Cook; 0 for other materials).
 pub const RKMPM_FIELD_DAMAGE: RkmpmField = 10;
+
+// The C codes are the discriminants of the option kinds in `options` (and of `Field`), which
+// the engine, scene files and checkpoints use; cbindgen needs them as literals, so they are
+// checked here when the crate compiles.
+const _: () = {
+    use crate::options::{IntegrationKind as I, ShapeKind as S, TransferKind as T, WallKind as W};
+    assert!(RKMPM_SHAPE_LINEAR == S::Linear as u32);
+    assert!(RKMPM_SHAPE_BSPLINE2 == S::Bspline2 as u32);
+    assert!(RKMPM_SHAPE_BSPLINE3 == S::Bspline3 as u32);
+    assert!(RKMPM_SHAPE_RK == S::Rk as u32);
+    assert!(RKMPM_INTEGRATION_MP == I::MaterialPoint as u32);
+    assert!(RKMPM_INTEGRATION_VC == I::Vc as u32);
+    assert!(RKMPM_TRANSFER_PIC_FLIP == T::PicFlip as u32);
+    assert!(RKMPM_TRANSFER_APIC == T::Apic as u32);
+    assert!(RKMPM_TRANSFER_MLS == T::Mls as u32);
+    assert!(RKMPM_SCHEME_USL == Scheme::Usl as u32);
+    assert!(RKMPM_SCHEME_MUSL == Scheme::Musl as u32);
+    assert!(RKMPM_BOUNDARY_FREE == W::Free as u32);
+    assert!(RKMPM_BOUNDARY_FIXED == W::Fixed as u32);
+    assert!(RKMPM_BOUNDARY_SLIP == W::Slip as u32);
+    assert!(RKMPM_BOUNDARY_FRICTION == W::Friction as u32);
+    assert!(RKMPM_FIELD_POSITION == Field::Position as u32);
+    assert!(RKMPM_FIELD_VELOCITY == Field::Velocity as u32);
+    assert!(RKMPM_FIELD_DISPLACEMENT == Field::Displacement as u32);
+    assert!(RKMPM_FIELD_STRESS == Field::Stress as u32);
+    assert!(RKMPM_FIELD_PRESSURE == Field::Pressure as u32);
+    assert!(RKMPM_FIELD_VOLUME == Field::Volume as u32);
+    assert!(RKMPM_FIELD_MASS == Field::Mass as u32);
+    assert!(RKMPM_FIELD_REFERENCE_POSITION == Field::ReferencePosition as u32);
+    assert!(RKMPM_FIELD_DEFORMATION_GRADIENT == Field::DeformationGradient as u32);
+    assert!(RKMPM_FIELD_PLASTIC_STRAIN == Field::PlasticStrain as u32);
+    assert!(RKMPM_FIELD_DAMAGE == Field::Damage as u32);
+};
 
 /// Progress of `rkmpm_sim_advance`, called after every one of its steps on the thread that calls
 /// it, with `user_data`, the simulation's step count, the time now, the time the run ends at and
@@ -381,16 +413,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_shape(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_shape", || {
         let s = sim_mut(sim)?;
-        let shape = match shape {
-            RKMPM_SHAPE_LINEAR => Shape::Linear,
-            RKMPM_SHAPE_BSPLINE2 => Shape::BSpline2,
-            RKMPM_SHAPE_BSPLINE3 => Shape::BSpline3,
-            RKMPM_SHAPE_RK => Shape::Rk {
-                order: rk_order,
-                support: rk_support,
-            },
-            other => return Err(unknown_enum("shape", other)),
-        };
+        let shape = Shape::from_kind(kind_of("shape", shape)?, rk_order, rk_support);
         with_sim!(&mut s.sim, m => m.set_shape(shape))?;
         Ok(())
     })
@@ -409,11 +432,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_integration(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_integration", || {
         let s = sim_mut(sim)?;
-        let integration = match integration {
-            RKMPM_INTEGRATION_MP => Integration::MaterialPoint,
-            RKMPM_INTEGRATION_VC => Integration::Vc { order: vc_order },
-            other => return Err(unknown_enum("integration", other)),
-        };
+        let integration = Integration::from_kind(kind_of("integration", integration)?, vc_order);
         with_sim!(&mut s.sim, m => m.set_integration(integration))?;
         Ok(())
     })
@@ -434,12 +453,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_transfer", || {
         let s = sim_mut(sim)?;
-        let transfer = match transfer {
-            RKMPM_TRANSFER_PIC_FLIP => Transfer::PicFlip { flip: flip_ratio },
-            RKMPM_TRANSFER_APIC => Transfer::Apic,
-            RKMPM_TRANSFER_MLS => Transfer::Mls,
-            other => return Err(unknown_enum("transfer", other)),
-        };
+        let transfer = Transfer::from_kind(kind_of("transfer", transfer)?, flip_ratio);
         with_sim!(&mut s.sim, m => m.set_transfer(transfer))?;
         Ok(())
     })
@@ -529,11 +543,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_scheme(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_scheme", || {
         let s = sim_mut(sim)?;
-        let scheme = match scheme {
-            RKMPM_SCHEME_USL => Scheme::Usl,
-            RKMPM_SCHEME_MUSL => Scheme::Musl,
-            other => return Err(unknown_enum("scheme", other)),
-        };
+        let scheme: Scheme = kind_of("scheme", scheme)?;
         with_sim!(&mut s.sim, m => m.set_scheme(scheme))?;
         Ok(())
     })
@@ -571,13 +581,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_boundary(
     gate("rkmpm_sim_set_boundary", || {
         let s = sim_mut(sim)?;
         let side = Side::from_sign(side)?;
-        let boundary = match kind {
-            RKMPM_BOUNDARY_FREE => Boundary::Free,
-            RKMPM_BOUNDARY_FIXED => Boundary::Fixed,
-            RKMPM_BOUNDARY_SLIP => Boundary::Slip,
-            RKMPM_BOUNDARY_FRICTION => Boundary::Friction(friction),
-            other => return Err(unknown_enum("boundary", other)),
-        };
+        let boundary = Boundary::from_kind(kind_of("boundary", kind)?, friction);
         with_sim!(&mut s.sim, m => m.set_boundary(axis as usize, side, boundary))?;
         Ok(())
     })
@@ -1097,10 +1101,7 @@ pub unsafe extern "C" fn rkmpm_sim_particle_count(sim: *const RkmpmSim) -> usize
 }
 
 fn field_from(field: RkmpmField) -> Result<Field, Failure> {
-    Field::ALL
-        .get(field as usize)
-        .copied()
-        .ok_or_else(|| unknown_enum("field", field))
+    kind_of("field", field)
 }
 
 /// Writes to `*out_len` how many values `rkmpm_sim_get_particles` writes for `field`.

@@ -48,9 +48,8 @@ pub mod boundary_points;
 pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
-use crate::grid::{Grid, GridNodes, NodeScatter, SharedSlice};
+use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, StencilNode, Stencils};
-use crate::step::Bins;
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;

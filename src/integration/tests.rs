@@ -3,11 +3,10 @@
 //! patch test under jittered particles.
 
 use super::*;
-use crate::boundary::Side;
 use crate::material::{Constitutive, Material};
+use crate::options::{Integration, Shape, Side, Transfer};
 use crate::shape::tests::TestRng;
-use crate::shape::Shape;
-use crate::sim::{Integration, Sim, Transfer};
+use crate::sim::Sim;
 use crate::{Boundary, Matrix};
 
 /// A box body `[0.3, 0.7]^D` on a grid of spacing 0.1, 2 particles per cell per direction
@@ -51,7 +50,7 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
     work.nodes.ensure(&grid, false, false, false).unwrap();
     work.stencils
         .compute(sim.shape.as_ref(), &grid, &ps.position);
-    work.bins.compute(sim.shape.as_ref(), &grid, &ps.position);
+    crate::shape::bin_particles(&mut work.bins, sim.shape.as_ref(), &grid, &ps.position);
     work.boundary_stencils
         .compute(sim.shape.as_ref(), &grid, &sim.boundary.position);
     let volumes: Vec<f64> = (0..ps.len()).map(|p| ps.volume(p)).collect();

@@ -15,17 +15,18 @@
 //! refused with `CorruptFile`; a newer format version with `Unsupported`. Files of version 1
 //! (without ids) still load.
 
-use crate::boundary::{Boundary, Walls};
-use crate::contact::Contact;
 use crate::error::{Error, ErrorKind, Result};
 use crate::integration::BoundaryPoints;
 use crate::material::{
     Constitutive, DruckerPrager, ElasticConstants, InertialRheology, JohnsonCook,
     JohnsonCookParameters, LinearElastic, Material, MieGruneisen, NeoHookean, PlasticState, Rigid,
 };
+use crate::options::{
+    Boundary, Contact, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Transfer,
+    TransferKind, Walls,
+};
 use crate::particles::Particles;
-use crate::shape::Shape;
-use crate::sim::{Integration, Scheme, Sim, Transfer};
+use crate::sim::Sim;
 use crate::{Matrix, Vector};
 use nalgebra::Matrix3;
 use std::path::Path;
@@ -281,77 +282,52 @@ fn read_material(r: &mut Reader) -> Result<Material> {
 
 fn write_options<const D: usize>(w: &mut Writer, sim: &Sim<D>) {
     let o = &sim.options;
-    match o.shape {
-        Shape::Linear => w.u32(0),
-        Shape::BSpline2 => w.u32(1),
-        Shape::BSpline3 => w.u32(2),
-        Shape::Rk { order, support } => {
-            w.u32(3);
-            w.u32(order);
-            w.f64(support);
-        }
+    // Each option is its kind's code followed by the parameters that kind carries.
+    w.u32(o.shape.kind().into());
+    if let Shape::Rk { order, support } = o.shape {
+        w.u32(order);
+        w.f64(support);
     }
-    match o.integration {
-        Integration::MaterialPoint => w.u32(0),
-        Integration::Vc { order } => {
-            w.u32(1);
-            w.u32(order);
-        }
+    w.u32(o.integration.kind().into());
+    if let Integration::Vc { order } = o.integration {
+        w.u32(order);
     }
-    match o.transfer {
-        Transfer::PicFlip { flip } => {
-            w.u32(0);
-            w.f64(flip);
-        }
-        Transfer::Apic => w.u32(1),
-        Transfer::Mls => w.u32(2),
+    w.u32(o.transfer.kind().into());
+    if let Transfer::PicFlip { flip } = o.transfer {
+        w.f64(flip);
     }
-    w.u32(match o.scheme {
-        Scheme::Usl => 0,
-        Scheme::Musl => 1,
-    });
+    w.u32(o.scheme.into());
     w.f64s(o.gravity.iter());
     for face in o.walls.faces.iter().flatten() {
-        let (tag, mu) = match *face {
-            Boundary::Free => (0, 0.0),
-            Boundary::Fixed => (1, 0.0),
-            Boundary::Slip => (2, 0.0),
-            Boundary::Friction(mu) => (3, mu),
-        };
-        w.u32(tag);
-        w.f64(mu);
+        w.u32(face.kind().into());
+        w.f64(face.friction());
     }
     w.u32(u32::from(o.contact.is_some()));
     w.f64(o.contact.map_or(0.0, |c| c.friction));
 }
 
+/// The option kind `K` of `code`, or a corrupt-file error naming `what`.
+fn kind<K: TryFrom<u32>>(what: &str, code: u32) -> Result<K> {
+    K::try_from(code).map_err(|_| corrupt(format!("unknown {what} tag {code}")))
+}
+
 fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> {
-    let shape = match r.u32()? {
-        0 => Shape::Linear,
-        1 => Shape::BSpline2,
-        2 => Shape::BSpline3,
-        3 => Shape::Rk {
+    let shape = match kind("shape", r.u32()?)? {
+        ShapeKind::Rk => Shape::Rk {
             order: r.u32()?,
             support: r.f64()?,
         },
-        other => return Err(corrupt(format!("unknown shape tag {other}"))),
+        other => Shape::from_kind(other, 0, 0.0),
     };
-    let integration = match r.u32()? {
-        0 => Integration::MaterialPoint,
-        1 => Integration::Vc { order: r.u32()? },
-        other => return Err(corrupt(format!("unknown integration tag {other}"))),
+    let integration = match kind("integration", r.u32()?)? {
+        IntegrationKind::Vc => Integration::Vc { order: r.u32()? },
+        other => Integration::from_kind(other, 0),
     };
-    let transfer = match r.u32()? {
-        0 => Transfer::PicFlip { flip: r.f64()? },
-        1 => Transfer::Apic,
-        2 => Transfer::Mls,
-        other => return Err(corrupt(format!("unknown transfer tag {other}"))),
+    let transfer = match kind("transfer", r.u32()?)? {
+        TransferKind::PicFlip => Transfer::PicFlip { flip: r.f64()? },
+        other => Transfer::from_kind(other, 0.0),
     };
-    let scheme = match r.u32()? {
-        0 => Scheme::Usl,
-        1 => Scheme::Musl,
-        other => return Err(corrupt(format!("unknown scheme tag {other}"))),
-    };
+    let scheme: Scheme = kind("scheme", r.u32()?)?;
     let mut gravity = Vector::<D>::zeros();
     for g in gravity.iter_mut() {
         *g = r.f64()?;
@@ -359,13 +335,7 @@ fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> 
     let mut walls = Walls::<D>::default();
     for face in walls.faces.iter_mut().flatten() {
         let (tag, mu) = (r.u32()?, r.f64()?);
-        *face = match tag {
-            0 => Boundary::Free,
-            1 => Boundary::Fixed,
-            2 => Boundary::Slip,
-            3 => Boundary::Friction(mu),
-            other => return Err(corrupt(format!("unknown wall tag {other}"))),
-        };
+        *face = Boundary::from_kind(kind("wall", tag)?, mu);
     }
     let contact_on = r.u32()?;
     let friction = r.f64()?;

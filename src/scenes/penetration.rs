@@ -13,12 +13,11 @@
 //! across is modelled, clamped at its edge (Børvik's plates are 500 mm across), so the plate is
 //! stiffer than in the test.
 
-use crate::boundary::{Boundary, Side};
 use crate::error::{Error, Result};
 use crate::material::{JohnsonCookParameters, Material};
+use crate::options::{Boundary, Integration, Shape, Side, Transfer};
 use crate::particles::Particles;
-use crate::shape::Shape;
-use crate::sim::{Integration, Sim, Transfer};
+use crate::sim::Sim;
 use crate::Vector;
 use std::collections::HashMap;
 

@@ -12,11 +12,10 @@
 //!   `D0 = 7.62 mm`, `v = 190 m/s`: final length 16.21 mm, foot diameter 13.56 mm; Johnson–Cook
 //!   constants of OFHC copper (A = 90 MPa, B = 292 MPa, n = 0.31, C = 0.025, m = 1.09).
 
-use crate::boundary::{Boundary, Side};
 use crate::error::{Error, Result};
 use crate::material::{JohnsonCookParameters, Material};
-use crate::shape::Shape;
-use crate::sim::{Integration, Sim, Transfer};
+use crate::options::{Boundary, Integration, Shape, Side, Transfer};
+use crate::sim::Sim;
 use crate::Vector;
 
 /// Which published Taylor test.

@@ -18,23 +18,10 @@ pub use stencil::{
 };
 
 use crate::error::Result;
-use crate::grid::Grid;
+use crate::grid::{Bins, Grid};
 use crate::Vector;
 
-/// The shape function a simulation uses, as the user chooses it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Shape {
-    /// Linear hats (standard MPM, C0).
-    Linear,
-    /// Quadratic B-spline (C1).
-    BSpline2,
-    /// Cubic B-spline (C2).
-    BSpline3,
-    /// Reproducing kernel of basis order `order` with normalized support `support` (`ã`, the
-    /// kernel support in cells): about 2 for order 1 (where it equals the cubic B-spline), 3 for
-    /// order 2, 3.5 to 4 for order 3.
-    Rk { order: u32, support: f64 },
-}
+pub use crate::options::{Shape, ShapeKind};
 
 impl Shape {
     /// Builds the shape function for dimension `D`.
@@ -48,6 +35,19 @@ impl Shape {
             }
         }
     }
+}
+
+/// Bins the particles at `x` on `grid` by the block of their stencil's first node under `shape`
+/// ([`Bins::compute`]).
+pub fn bin_particles<const D: usize>(
+    bins: &mut Bins<D>,
+    shape: &dyn ShapeFunction<D>,
+    grid: &Grid<D>,
+    x: &[Vector<D>],
+) {
+    bins.compute(shape.stencil_width(), grid, x, |xi| {
+        shape.stencil_origin(xi)
+    });
 }
 
 /// What every shape function provides.

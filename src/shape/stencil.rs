@@ -12,8 +12,8 @@
 
 use super::bspline::{tensor_product, BSpline};
 use super::ShapeFunction;
+use crate::grid::BlockLayout;
 use crate::grid::{scatter_add, Grid, NodeScatter};
-use crate::step::BlockLayout;
 use crate::{Matrix, Vector};
 use rayon::prelude::*;
 
@@ -490,7 +490,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
     }
 
     /// Each particle's block under the layout given to `compute_with`, found with the factors
-    /// (for [`Bins::compute_from_keys`](crate::step::Bins::compute_from_keys)).
+    /// (for [`Bins::compute_from_keys`](crate::grid::Bins::compute_from_keys)).
     pub fn block_keys(&self) -> &[u32] {
         &self.keys
     }
@@ -549,8 +549,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     /// The next row of a stencil: `k = (k_1, …, k_{D−1})` with axis 1 fastest, and the storage
     /// index of the row's first node.
     #[inline(always)]
-    // An index loop: the iterator form (`zip`, `skip`) made grid to particle slower (2D 27.7 →
-    // 31.2 ns, 3D 74 → 82).
+    // An index loop: the iterator form (`zip`, `skip`) compiles to a slower grid to particle.
     #[allow(clippy::needless_range_loop)]
     fn next_row(&self, k: &mut [usize; D], row: &mut usize) {
         for a in 1..D {
@@ -810,7 +809,8 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
     }
 
     // The row loop and its factors `c`, `c_a` are written out here and in `scatter` on purpose:
-    // a shared row visitor (tried) made 3D P2G 140 -> 220 ns and G2P 145 -> 171 ns per particle.
+    // behind a shared row visitor the compiler no longer keeps the row sums in registers, and
+    // both maps slow down (most in 3D).
     /// Sum factorization: along each row of the stencil (axis 0, contiguous nodes) the sums
     /// `Σ w_0 v`, `Σ w_0' v`, `Σ w_0 (x − x_p)_0 v` are taken once, then weighted by the row's
     /// factors of the other axes: `Ψ = w_0 c`, `∂_0 Ψ = w_0' c`, `∂_a Ψ = w_0 c_a` (a ≥ 1).
@@ -889,8 +889,8 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
             }
             g.velocity += c * s_w;
             // Without FLIP the sum adds zeros, which the compiler cannot drop (c may not be
-            // finite). Skipping it frees registers in 3D: grid to particle 106 → 95 ns with
-            // MLS. In 2D the branch made it slower (33.5 → 35.3 ns), so 2D keeps the sum.
+            // finite). Skipping it frees registers in 3D; in 2D the branch costs more than the
+            // sum, so 2D keeps it.
             if D == 2 || v_old.is_some() {
                 g.velocity_change += c * s_dv;
             }
@@ -945,13 +945,10 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
 ///
 /// The functions are `#[inline(always)]` and not `#[target_feature]` (which cannot be): inlined
 /// into the body [`crate::cpu::wide`] compiles for AVX2, the intrinsics become AVX2
-/// instructions there. The caller takes this path only when `cpu::has_avx2()`. Measured (3D,
-/// 10^6 particles, one thread): grid to particle 85 → 71 ns per particle-step with MLS, 103 →
-/// 85 with APIC; out of line (a `#[target_feature]` function) only 85 → 81 with MLS.
+/// instructions there (out of line, behind a `#[target_feature]` call, most of the gain is
+/// lost). The caller takes this path only when `cpu::has_avx2()`.
 ///
-/// The 2D gather (`gather_2d`) puts two nodes of a row in one register. 2D, 10^6 particles,
-/// one thread, MLS: grid to particle 28.1 → 26.5 ns per particle-step; APIC and PIC/FLIP with
-/// cubic B-splines 1.09–1.10× for the whole step.
+/// The 2D gather (`gather_2d`) puts two nodes of a row in one register.
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     use super::{Factors, Gathered, TensorView};

@@ -16,8 +16,8 @@
 //! `θ` comes from the masses the nodes have after the mirror walls folded their ghosts in; a
 //! ghost takes its mirror node's `θ`, since its function is folded into that node's.
 
-use crate::boundary::Walls;
 use crate::grid::{EdgeLumping, Grid, GridNodes};
+use crate::options::Walls;
 use crate::particles::Particles;
 use crate::shape::Stencils;
 use rayon::prelude::*;

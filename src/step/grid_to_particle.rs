@@ -295,9 +295,8 @@ pub trait Finish<const D: usize>: Sync {
 /// dependency chains (gather → F → det F → ln → stress) instead of waiting on each in turn.
 pub(crate) const CHUNK: usize = 8;
 
-/// Chunks ahead whose new state grid to particle asks the cache for (32 particles): 2D MLS,
-/// 10^5 particles, two threads, the step 1.05× faster with 4, 1.04× with 2, 1.02× with 8, 1.01×
-/// with 16, against none (BENCHMARKS.md).
+/// Chunks ahead whose new state grid to particle asks the cache for (32 particles): far enough
+/// for the lines to arrive before the stores, near enough to stay in the cache.
 const AHEAD: usize = 4;
 
 /// The particles of a chunk of grid to particle: slots `first..first + len`, each holding
@@ -429,8 +428,8 @@ where
     let flip = plan.flip > 0.0;
     let update_deformation = finish.is_some();
     let apic_inertia = plan.inverse_inertia.is_some();
-    // Slices and plain values captured by value, as in particle to grid (2D MLS, one thread:
-    // 29.2 -> 27.7 ns per particle-step; a copy per task as there changed nothing here).
+    // Slices and plain values captured by value, as in particle to grid, so that the compiler
+    // keeps them in registers.
     let stencils = stencils.local();
     let (position, material, velocity, deformation_gradient) = (
         &ps.position[..],

@@ -1,7 +1,7 @@
 //! Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` with the wall conditions.
 
-use crate::boundary::Walls;
 use crate::grid::{Grid, GridNodes, SharedSlice};
+use crate::options::Walls;
 use crate::Vector;
 use rayon::prelude::*;
 

@@ -19,7 +19,6 @@
 //! so a failed step leaves the last good state.
 //! [`PhaseTimes`] accumulates the time per phase.
 
-mod bins;
 mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
@@ -31,7 +30,7 @@ use profile::lap;
 pub use profile::{MemoryUse, PhaseTimes};
 pub use timestep::Progress;
 
-pub use bins::{Bins, BlockLayout};
+pub use crate::grid::{Bins, BlockLayout};
 pub use grid_to_particle::{
     grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, NewState,
     NewStateWriter, NoFinish, ParticleUpdate,
@@ -43,8 +42,9 @@ use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::GridNodes;
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
-use crate::shape::{BSpline, BSplineOrder, Shape, StencilView, Stencils, TensorStencils};
-use crate::sim::{Scheme, Sim, Transfer};
+use crate::options::{Scheme, Shape, Transfer};
+use crate::shape::{BSpline, BSplineOrder, StencilView, Stencils, TensorStencils};
+use crate::sim::Sim;
 use crate::{Matrix, Vector};
 use grid_to_particle::{Chunk, CHUNK};
 use nalgebra::Matrix3;
@@ -185,8 +185,7 @@ impl<const D: usize> Sim<D> {
     /// [`Sim::step`] after its checks and the body force, run by a thread of rayon's pool: the
     /// parallel passes it starts then run on the pool's threads without the calling thread
     /// handing each one over and sleeping until it ends (two thread switches per pass, about
-    /// a dozen passes per step). 2D MLS, 10^5 particles, one thread: 13.8–14.0 → 15.1–15.4
-    /// million particle-steps/s; two threads 26.2–28.3 → 28.1–28.4 (BENCHMARKS.md).
+    /// a dozen passes per step), which shows most on small problems.
     fn step_in_pool(&mut self, dt: f64) -> Result<()> {
         // The surface VC finds from the particles this step replaces the last one, which a
         // rejected step restores.
@@ -355,9 +354,12 @@ impl<const D: usize> Sim<D> {
             None => {
                 let mut clock = std::time::Instant::now();
                 self.work.clear_grid();
-                self.work
-                    .bins
-                    .compute(self.shape.as_ref(), &self.grid, &self.particles.position);
+                crate::shape::bin_particles(
+                    &mut self.work.bins,
+                    self.shape.as_ref(),
+                    &self.grid,
+                    &self.particles.position,
+                );
                 self.work.times.bins += lap(&mut clock);
                 let mut stencils = std::mem::take(&mut self.work.stencils);
                 stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);

@@ -1,13 +1,12 @@
 //! Tests of the step: conservation in the transfers, the vibrating bar against its exact
 //! solution, wall conditions, and the guards that keep the last good state.
 
-use crate::boundary::{Boundary, Side};
 use crate::error::ErrorKind;
 use crate::material::{Material, PlasticState};
+use crate::options::{Boundary, Scheme, Shape, Side, Transfer};
 use crate::particles::{Field, Particles};
 use crate::scenes::{run_vibrating_bar, VibratingBar};
-use crate::shape::Shape;
-use crate::sim::{Scheme, Sim, Transfer};
+use crate::sim::Sim;
 use crate::{Matrix, Vector};
 
 /// Young's modulus of the test block.
@@ -1154,7 +1153,7 @@ fn check_tasks(
 /// the stable order by block: the particles of a block in index order, the blocks ascending.
 #[test]
 fn bins_sorted_in_chunks_are_the_stable_order() {
-    use crate::step::{Bins, BlockLayout};
+    use crate::grid::{Bins, BlockLayout};
     let grid = crate::grid::Grid::<2>::new(Vector::<2>::zeros(), [600, 40], 0.1).unwrap();
     let layout = BlockLayout::new(3, &grid);
     let mut rng = crate::shape::UniformRng::new(11);
@@ -1181,9 +1180,9 @@ fn bins_sorted_in_chunks_are_the_stable_order() {
 /// two blocks apart along some axis, so the stencils of their particles never share a node.
 #[test]
 fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
+    use crate::grid::{Bins, BlockLayout};
     use crate::shape::TensorStencils;
     use crate::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils};
-    use crate::step::{Bins, BlockLayout};
     let mut rng = crate::shape::UniformRng::new(5);
     for shape in [
         Shape::Linear,
@@ -1201,7 +1200,7 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
             .map(|_| Vector::<2>::new(30.0 * rng.uniform(), 2.3 * rng.uniform()))
             .collect();
         let mut bins = Bins::<2>::default();
-        bins.compute(f.as_ref(), &grid, &x);
+        crate::shape::bin_particles(&mut bins, f.as_ref(), &grid, &x);
         let mut seen = vec![0; x.len()];
         for (_, range) in &bins.occupied {
             let ps = &bins.order[range.clone()];
@@ -1239,7 +1238,7 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
             .map(|_| Vector::<2>::new(30.0 * rng.uniform(), 32.0 * rng.uniform()))
             .collect();
         let mut tall_bins = Bins::<2>::default();
-        tall_bins.compute(f.as_ref(), &tall, &y);
+        crate::shape::bin_particles(&mut tall_bins, f.as_ref(), &tall, &y);
         assert_eq!(tall_bins.tasks.len(), 2, "{shape:?}");
         let mut tall_stencils = Stencils::<2>::default();
         tall_stencils.compute(f.as_ref(), &tall, &y);
@@ -1618,9 +1617,9 @@ fn the_body_force_is_called_on_the_thread_that_steps() {
 #[test]
 fn active_nodes_collected_in_parallel_are_the_serial_list() {
     fn check<const D: usize>(dims: [usize; D]) {
+        use crate::grid::Bins;
         use crate::grid::{Grid, GridNodes, NodeScatter};
         use crate::shape::ShapeFunction;
-        use crate::step::Bins;
         let mut rng = crate::shape::UniformRng::new(11);
         let f: Box<dyn ShapeFunction<D>> = Shape::BSpline2.build().unwrap();
         let mut grid = Grid::<D>::new(Vector::<D>::zeros(), dims, 0.1).unwrap();
@@ -1630,7 +1629,7 @@ fn active_nodes_collected_in_parallel_are_the_serial_list() {
             .map(|_| Vector::<D>::from_fn(|a, _| 0.06 * dims[a] as f64 * rng.uniform()))
             .collect();
         let mut bins = Bins::<D>::default();
-        bins.compute(f.as_ref(), &grid, &x);
+        crate::shape::bin_particles(&mut bins, f.as_ref(), &grid, &x);
         let mut nodes = GridNodes::<D>::default();
         nodes.ensure(&grid, false, false, false).unwrap();
         // Every third node touched, every fifth given mass, everywhere in the grid.

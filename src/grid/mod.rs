@@ -12,6 +12,9 @@
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::Vector;
 
+mod blocks;
+pub use blocks::{Bins, BlockLayout};
+
 /// Geometry of the background grid. Nodes have integer indices `-ghost ..= cells + ghost` per axis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<const D: usize> {

@@ -19,8 +19,7 @@
 //! The occupied blocks also give the node blocks a step touches (each occupied block and its
 //! upper neighbours), so the list of active nodes is collected without visiting empty blocks.
 
-use crate::grid::{Grid, GridNodes, SharedSlice};
-use crate::shape::ShapeFunction;
+use super::{Grid, GridNodes, SharedSlice};
 use crate::Vector;
 use rayon::prelude::*;
 
@@ -28,21 +27,15 @@ use rayon::prelude::*;
 const MIN_BLOCK: usize = 4;
 /// Nodes per block along axis 0, the fastest storage axis of the grid and, usually, of the
 /// particles (lattices are added with axis 0 fastest): a block's particles then lie in long runs
-/// of the particle arrays. Measured on the 2D quadratic B-spline benchmark block (10^6
-/// particles, one thread), particle to grid with a generic scatter took 149 ns per particle with
-/// blocks of 4 × 4 nodes, 86 with 16 × 4, 72 with 32 × 4 and 68 with 64 × 4; with the
-/// specialised scatter it has now, 41 ns with 32 × 4, 34 with 128 × 4 and 256 × 4, 27 with
-/// blocks as long as the grid (which leave too few blocks per colour to share among threads when
-/// a body is thin along axis 1). The whole step with 128 against 32, alternating, twice each: 2D
-/// 10^6 1.07× (one thread), 1.00× (two); 2D 10^5 1.10×, 1.08×; 3D 10^6 1.01×, 1.03×.
+/// of the particle arrays. Particle to grid gets faster as blocks grow along axis 0 and levels
+/// off at this length; blocks as long as the grid would be faster still on one thread, but leave
+/// too few blocks per colour to share among threads when a body is thin along axis 1.
 const LONG_BLOCK: usize = 128;
 
 /// Occupied rows of blocks from which particle to grid runs by rows ([`Bins::tasks`]): a row
-/// is a longer run of particles and nodes than a block, and there are half as many colours.
-/// Measured (2D MLS, 10^6 particles, 158 rows): particle to grid 17.8 → 15.8 ns per
-/// particle-step on one thread, 10.2 → 9.0 on two; 3D unchanged. Fewer rows would leave too
-/// few tasks per colour to share among threads. The choice depends on the particles only, not
-/// on the number of threads.
+/// is a longer run of particles and nodes than a block, and there are half as many colours
+/// (faster in 2D, the same in 3D). Fewer rows would leave too few tasks per colour to share
+/// among threads. The choice depends on the particles only, not on the number of threads.
 const MIN_ROWS: usize = 32;
 
 /// Average run of consecutive particle slots in block order below which the particles are
@@ -109,8 +102,7 @@ impl<const D: usize> BlockLayout<D> {
 /// keep their blocks in long runs, so the counting sort adds and places a run at once instead of
 /// incrementing a block's count particle by particle: that is a chain of loads and stores to
 /// one address, a store-to-load forwarding latency per particle on processors that do not
-/// rename memory. 2D MLS, 10^6 particles, Intel Xeon: bins 5.0–5.3 → 1.75 ns per
-/// particle-step on one thread, 2.8 → 1.05 on two (BENCHMARKS.md).
+/// rename memory.
 fn runs(keys: &[u32]) -> impl Iterator<Item = (u32, u32)> + '_ {
     let mut rest = keys;
     std::iter::from_fn(move || {
@@ -171,15 +163,22 @@ impl<const D: usize> Default for Bins<D> {
 }
 
 impl<const D: usize> Bins<D> {
-    /// Bins the particles at `x` for `shape` on `grid`, from the first node of each one's
-    /// stencil (`ShapeFunction::stencil_origin`; the B-spline stencils find the keys with their
-    /// factors and call [`Bins::compute_from_keys`]).
-    pub fn compute(&mut self, shape: &dyn ShapeFunction<D>, grid: &Grid<D>, x: &[Vector<D>]) {
-        let layout = BlockLayout::new(shape.stencil_width(), grid);
+    /// Bins the particles at `x` on `grid` for a shape function of `width` stencil nodes per
+    /// axis, from the first node of each one's stencil, `first_node(x)` of its position `x` in
+    /// cell units (`ShapeFunction::stencil_origin`; the B-spline stencils find the keys with
+    /// their factors and call [`Bins::compute_from_keys`]).
+    pub fn compute(
+        &mut self,
+        width: usize,
+        grid: &Grid<D>,
+        x: &[Vector<D>],
+        first_node: impl Fn(&Vector<D>) -> [i64; D] + Sync,
+    ) {
+        let layout = BlockLayout::new(width, grid);
         let mut keys = std::mem::take(&mut self.keys);
         keys.resize(x.len(), 0);
         keys.par_iter_mut().zip(x).for_each(|(k, x)| {
-            *k = layout.key(&shape.stencil_origin(&grid.to_cell_units(x)));
+            *k = layout.key(&first_node(&grid.to_cell_units(x)));
         });
         self.compute_from_keys(&layout, &keys);
         self.keys = keys;
@@ -198,8 +197,7 @@ impl<const D: usize> Bins<D> {
         // gives each chunk its slots in every block, and the chunks place their particles at
         // once. A stable sort has one result, so the order does not depend on the chunks.
         // Chunks of at least 2^17 particles: below that the sort runs on one thread, as each
-        // parallel pass costs more than it saves there (2D MLS, 10^5 particles, two threads on
-        // an Intel Xeon KVM guest: bins 1.49-1.55 -> 0.85-0.90 ns per particle-step with 2^14).
+        // parallel pass costs more than it saves there.
         let chunk = n.div_ceil(rayon::current_num_threads().max(1)).max(1 << 17);
         let chunks = n.div_ceil(chunk).max(1);
         self.counts.clear();
