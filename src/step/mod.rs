@@ -1,17 +1,22 @@
-//! One explicit MPM step (METHOD.md section 1), phase by phase:
+//! One explicit MPM step (METHOD.md section 1), phase by phase, each in the file named after it:
 //!
 //! 1. shape functions of every particle, once per step: B-splines as 1D factors
 //!    ([`crate::shape::TensorStencils`]), RK and every shape under VC as node lists
 //!    ([`crate::shape::Stencils`]); and the particles binned by grid block, the blocks coloured
-//!    ([`Bins`]), for the lock-free, thread-count-independent parallel maps to the grid
-//!    (B-splines take each particle's block from its factors' first node);
-//! 2. body forces (the callback, once per step with whole arrays), VC corrections;
-//! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force;
-//! 4. [`grid_update`]: velocities, wall conditions;
+//!    ([`Bins`], beside the grid), for the lock-free, thread-count-independent parallel maps to
+//!    the grid (B-splines take each particle's block from its factors' first node);
+//! 2. body forces (the callback, once per step with whole arrays), VC corrections
+//!    (`crate::integration`), over the boundary points or the surface found from the particles
+//!    (`surface`);
+//! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force; tractions
+//!    (`surface`);
+//! 4. [`grid_update`]: velocities, wall conditions; under contact one field per body, then the
+//!    contact correction ([`crate::contact`]);
 //! 5. [`grid_to_particle`]: velocity (PIC/FLIP or APIC), position, velocity gradient, `F`;
-//!    under USL each particle's constitutive update and checks follow in the same pass, while
-//!    it is in cache; under MUSL the new particle momenta are mapped to the grid again first and
-//!    the constitutive update and checks run after;
+//!    under USL each particle's constitutive update and checks (`constitutive_update`) follow in
+//!    the same pass, while it is in cache; under MUSL the new particle momenta are mapped to the
+//!    grid again first (`musl`) and the constitutive update and checks run after; boundary
+//!    points move with the grid (`surface`);
 //! 6. the grid is reset where it was written.
 //!
 //! The new particle state is built in arrays of the workspace ([`NewState`]) and swapped with the
@@ -19,11 +24,14 @@
 //! so a failed step leaves the last good state.
 //! [`PhaseTimes`] accumulates the time per phase.
 
+mod constitutive_update;
 mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
+mod musl;
 mod particle_to_grid;
 mod profile;
+mod surface;
 mod timestep;
 pub(crate) use profile::bytes as profile_bytes;
 use profile::lap;
@@ -39,16 +47,18 @@ pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
 
 use crate::error::{check_positive, Error, ErrorKind, Result};
-use crate::grid::GridNodes;
+use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
-use crate::material::{block, embed3, pressure, Constitutive, PlasticState};
-use crate::options::{Scheme, Shape, Transfer};
+use crate::material::Constitutive;
+use crate::options::{Scheme, Shape, Transfer, Walls};
+use crate::particles::Particles;
 use crate::shape::{BSpline, BSplineOrder, StencilView, Stencils, TensorStencils};
 use crate::sim::Sim;
-use crate::{Matrix, Vector};
-use grid_to_particle::{Chunk, CHUNK};
-use nalgebra::Matrix3;
+use crate::Vector;
+use constitutive_update::ConstitutiveUpdate;
 use rayon::prelude::*;
+pub use surface::BoundaryUpdate;
+use surface::{apply_tractions, found_surface, move_boundary_points, settle_boundary_points};
 
 /// Scratch space of a step, kept between steps so the hot loops do not allocate.
 #[derive(Debug, Default)]
@@ -113,14 +123,6 @@ pub enum Reorder {
     AtCommit,
 }
 
-/// The new state of one boundary point.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BoundaryUpdate<const D: usize> {
-    pub position: Vector<D>,
-    pub deformation_gradient: Matrix<D>,
-    pub area_normal: Vector<D>,
-}
-
 /// What the transfer needs from the particles and the shape function.
 #[derive(Debug, Clone, Copy)]
 pub struct TransferPlan {
@@ -133,6 +135,19 @@ pub struct TransferPlan {
     /// MLS: the force rides on the affine momentum and the velocity gradient is `C_p` (then
     /// `apic` is on and `inverse_inertia` is given).
     pub mls: bool,
+}
+
+/// What the phases of one step read and none of them changes.
+pub(crate) struct StepInputs<'a, const D: usize, S> {
+    pub grid: &'a Grid<D>,
+    pub particles: &'a Particles<D>,
+    /// The particles' shape functions this step.
+    pub stencils: &'a S,
+    /// The particles binned by grid block for the maps to the grid.
+    pub bins: &'a Bins<D>,
+    pub walls: &'a Walls<D>,
+    pub plan: TransferPlan,
+    pub dt: f64,
 }
 
 impl<const D: usize> Sim<D> {
@@ -677,100 +692,31 @@ impl<const D: usize> Sim<D> {
             &mut admissible,
         );
         if !usl {
-            // MUSL: map the new particle momenta to the grid again; the velocity gradient uses
-            // those grid velocities.
-            for &n in &work.nodes.active {
-                work.nodes.momentum[n] = Vector::zeros();
-            }
-            let v = &new.velocity[..];
-            let velocity = move |p: usize| v[p];
-            particle_to_grid(
+            // MUSL: the new particle momenta mapped to the grid again, and `F` from those
+            // grid velocities.
+            let inputs = StepInputs {
                 grid,
-                ps,
-                &work.bins,
+                particles: ps,
                 stencils,
-                None,
-                velocity,
-                plan.apic.then_some({
-                    let c = &new.affine[..];
-                    move |p: usize| c[p]
-                }),
-                None,
-                None,
-                &mut work.nodes,
-            );
-            grid_update(
-                grid,
-                &self.options.walls,
-                &mut work.nodes,
-                None,
-                mass_floor,
-                false,
-            );
-            let nodes = &work.nodes;
-            new.deformation_gradient
-                .par_iter_mut()
-                .enumerate()
-                .for_each(|(p, f)| {
-                    let l = match (plan.mls, plan.inverse_inertia) {
-                        (true, Some(inv)) => {
-                            mls_velocity_gradient(stencils, grid, nodes, p, &ps.position[p], inv)
-                        }
-                        _ => velocity_gradient(stencils, nodes, p),
-                    };
-                    *f = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];
-                });
+                bins: &work.bins,
+                walls: &self.options.walls,
+                plan,
+                dt,
+            };
+            musl::second_map(&inputs, mass_floor, &mut work.nodes, &mut new);
         }
 
-        // Boundary points move with the grid like massless particles; Nanson for n a.
+        // Boundary points move with the grid like massless particles.
         let mut boundary_updates = std::mem::take(&mut work.boundary_updates);
         boundary_updates.clear();
         if with_boundary && !found {
-            let nodes = &work.nodes;
             let bs = &work.boundary_stencils;
-            boundary_updates.extend((0..boundary.len()).map(|b| {
-                let (ns, ws, _) = bs.of(b);
-                let v: Vector<D> = ns
-                    .iter()
-                    .zip(ws)
-                    .map(|(&n, &w)| w * nodes.velocity[n])
-                    .sum();
-                let f = (Matrix::<D>::identity() + dt * velocity_gradient(bs, nodes, b))
-                    * boundary.deformation_gradient[b];
-                let j = crate::determinant(&f);
-                let area_normal = f
-                    .try_inverse()
-                    .map_or(Vector::from_element(f64::NAN), |fi| {
-                        j * fi.transpose() * boundary.reference_area_normal[b]
-                    });
-                BoundaryUpdate {
-                    position: boundary.position[b] + dt * v,
-                    deformation_gradient: f,
-                    area_normal,
-                }
-            }));
+            move_boundary_points(boundary, bs, &work.nodes, dt, &mut boundary_updates);
         }
 
         work.times.grid_to_particle += lap(&mut clock);
         if !usl {
-            let writer = new.writer();
-            admissible.clear();
-            admissible.resize(ps.len(), false);
-            (speed, all_admissible) = admissible
-                .par_iter_mut()
-                .enumerate()
-                .map_init(PlasticState::default, |scratch, (p, ok)| {
-                    // SAFETY: every particle index is visited by one task only.
-                    unsafe {
-                        let mut u = writer.get(p);
-                        let finished =
-                            finish.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
-                        writer.store(p, &u);
-                        *ok = finished.is_some();
-                        (finished.unwrap_or(0.0), *ok)
-                    }
-                })
-                .reduce(|| (0.0, true), |a, b| (a.0.max(b.0), a.1 && b.1));
+            (speed, all_admissible) = finish.run_all(&mut new, &mut admissible);
             work.times.constitutive += lap(&mut clock);
         }
 
@@ -799,28 +745,8 @@ impl<const D: usize> Sim<D> {
             work.boundary_updates = boundary_updates;
             return Err(Error::new(kind, message));
         }
-        // Boundary points on a wall stay on it (round-off may not push them out).
-        let domain = grid.domain();
-        for u in boundary_updates.iter_mut() {
-            self.options.walls.clamp_to_walls(&domain, &mut u.position);
-        }
-        let bad = boundary_updates.iter().enumerate().find_map(|(b, u)| {
-            let what = if !u
-                .position
-                .iter()
-                .chain(u.area_normal.iter())
-                .all(|c| c.is_finite())
-            {
-                "has a non-finite value"
-            } else if crate::determinant(&u.deformation_gradient) <= 0.0 {
-                "is inverted"
-            } else if !domain.contains(&u.position) {
-                "would leave the grid"
-            } else {
-                return None;
-            };
-            Some((b, what))
-        });
+        let bad =
+            settle_boundary_points(&self.options.walls, &grid.domain(), &mut boundary_updates);
         if let Some((b, what)) = bad {
             let message = format!(
                 "step {} (t = {:e}, dt = {dt:e}) rejected: boundary point {b} {what}",
@@ -880,126 +806,6 @@ impl<const D: usize> Sim<D> {
     }
 }
 
-/// Step 6, the constitutive update of one particle (run inside the gather under USL): elastic
-/// models from `F`, history models by return mapping from their state and the increment
-/// `ΔF = F^{n+1} (F^n)⁻¹`; particles kept inside the walls; the checks.
-struct ConstitutiveUpdate<'a, const D: usize> {
-    domain: crate::grid::DomainBox<D>,
-    particles: &'a crate::particles::Particles<D>,
-    materials: &'a [crate::material::Material],
-    walls: &'a crate::boundary::Walls<D>,
-    any_wall: bool,
-    dt: f64,
-}
-
-impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
-    // Always inlined into the gather, which keeps the new state in registers.
-    #[inline(always)]
-    fn finish(
-        &self,
-        p: usize,
-        u: &mut ParticleUpdate<D>,
-        history: &mut PlasticState,
-    ) -> Option<f64> {
-        let j = crate::determinant(&u.deformation_gradient);
-        if j.is_nan() || j <= 0.0 {
-            // Inverted or not finite: the checks reject the step; no stress to compute.
-            u.stress = Matrix::zeros();
-            u.pressure = 0.0;
-            return None;
-        }
-        let ps = self.particles;
-        let material = &self.materials[ps.material[p] as usize];
-        let mut wave_speed = None;
-        (u.stress, u.pressure) = if material.is_elastic() {
-            let (stress, c) = material.elastic_stress_and_wave_speed(&u.deformation_gradient, j);
-            wave_speed = Some(c);
-            stress
-        } else {
-            let f = embed3(&u.deformation_gradient);
-            let f_old = embed3(&ps.deformation_gradient[p]);
-            let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
-            let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, self.dt);
-            *history = state;
-            (block(&s3), pressure(&s3))
-        };
-        self.complete(u, j, || {
-            wave_speed.unwrap_or_else(|| material.wave_speed(j))
-        })
-    }
-
-    /// A chunk of one neo-Hookean material with no particle inverted: the steps of `finish`
-    /// over the chunk's particles as lanes (`NeoHookean::stress_lanes`), which the compiler
-    /// runs in vector registers; the same operations per particle, so the same bits.
-    #[inline(always)]
-    fn finish_chunk(
-        &self,
-        chunk: Chunk<'_>,
-        us: &mut [ParticleUpdate<D>],
-        speeds: &mut [Option<f64>],
-    ) -> bool {
-        let n = us.len();
-        let ps = self.particles;
-        let id = ps.material[chunk.particle(0)];
-        if !chunk.all(|p| ps.material[p] == id) {
-            return false;
-        }
-        let crate::material::Material::NeoHookean(m) = &self.materials[id as usize] else {
-            return false;
-        };
-        // Lanes past `n` hold the identity (J = 1), and nothing reads them back.
-        let (mut f, mut j) = ([[[0.0; CHUNK]; D]; D], [1.0; CHUNK]);
-        for (k, u) in us.iter().enumerate() {
-            j[k] = crate::determinant(&u.deformation_gradient);
-            for (a, row) in f.iter_mut().enumerate() {
-                for (b, lane) in row.iter_mut().enumerate() {
-                    lane[k] = u.deformation_gradient[(a, b)];
-                }
-            }
-        }
-        for (a, row) in f.iter_mut().enumerate() {
-            row[a][n..].fill(1.0);
-        }
-        // NaN or not positive: `finish` handles it (and says why).
-        if !j[..n].iter().all(|&j| j > 0.0) {
-            return false;
-        }
-        let mut ln_j = [0.0; CHUNK];
-        for (l, j) in ln_j.iter_mut().zip(&j) {
-            *l = j.ln();
-        }
-        let (mut s, mut pressure) = ([[[0.0; CHUNK]; D]; D], [0.0; CHUNK]);
-        m.stress_lanes(&f, &j, &ln_j, &mut s, &mut pressure);
-        let wave_speed: [f64; CHUNK] = std::array::from_fn(|k| m.wave_speed_from_log(ln_j[k]));
-        for (k, (u, speed)) in us.iter_mut().zip(speeds.iter_mut()).enumerate() {
-            u.stress = Matrix::<D>::from_fn(|a, b| s[a][b][k]);
-            u.pressure = pressure[k];
-            *speed = self.complete(u, j[k], || wave_speed[k]);
-        }
-        true
-    }
-}
-
-impl<const D: usize> ConstitutiveUpdate<'_, D> {
-    /// The end of `finish` once the stress is in `u` (`j = det F > 0`): the particle kept
-    /// inside the walls (`Walls::clamp_to_walls`), and its signal speed `c + |v|` as
-    /// `Sim::signal_speed` takes it from the committed state, or `None` when the new state is
-    /// not admissible.
-    #[inline(always)]
-    fn complete(
-        &self,
-        u: &mut ParticleUpdate<D>,
-        j: f64,
-        wave_speed: impl FnOnce() -> f64,
-    ) -> Option<f64> {
-        if self.any_wall {
-            self.walls.clamp_to_walls(&self.domain, &mut u.position);
-        }
-        u.is_admissible(&self.domain, j)
-            .then(|| wave_speed() + u.velocity.norm())
-    }
-}
-
 /// Clears the nodes the last step wrote (all fields zero, none active), of the one field and of
 /// each body's.
 fn clear_grid<const D: usize>(nodes: &mut GridNodes<D>, bodies: &mut [GridNodes<D>]) {
@@ -1014,61 +820,6 @@ impl<const D: usize> Workspace<D> {
     /// and of each body's; the step does it itself, while it bins.
     pub fn clear_grid(&mut self) {
         clear_grid(&mut self.nodes, &mut self.bodies);
-    }
-}
-
-/// The surface of the particles as they are now ([`BoundaryPoints::of_particles`]): of all of
-/// them, or under contact of those of material `body` only.
-fn found_surface<const D: usize>(
-    grid: &crate::grid::Grid<D>,
-    ps: &crate::particles::Particles<D>,
-    body: Option<u32>,
-) -> Result<BoundaryPoints<D>> {
-    let box_ = (&grid.origin, &grid.upper());
-    let (x, na) = match body {
-        None => BoundaryPoints::of_particles(
-            box_,
-            grid.cell_size,
-            &ps.position,
-            &ps.reference_volume,
-            &ps.deformation_gradient,
-        ),
-        Some(body) => {
-            let members: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == body).collect();
-            BoundaryPoints::of_particles(
-                box_,
-                grid.cell_size,
-                &gather(&ps.position, &members),
-                &gather(&ps.reference_volume, &members),
-                &gather(&ps.deformation_gradient, &members),
-            )
-        }
-    };
-    let mut surface = BoundaryPoints::default();
-    surface.add(&x, &na, None)?;
-    Ok(surface)
-}
-
-/// `values[p]` for each `p` of `members`.
-fn gather<T: Copy>(values: &[T], members: &[usize]) -> Vec<T> {
-    members.iter().map(|&p| values[p]).collect()
-}
-
-/// Adds the traction forces `Σ_b Ψ_I(x_b) t_b |n a|_b` of the boundary points.
-fn apply_tractions<const D: usize>(
-    boundary: &BoundaryPoints<D>,
-    stencils: &Stencils<D>,
-    nodes: &mut GridNodes<D>,
-) {
-    for b in 0..boundary.len() {
-        let force = boundary.traction[b] * boundary.area_normal[b].norm();
-        let (ns, ws, _) = stencils.of(b);
-        for (&n, &w) in ns.iter().zip(ws) {
-            if w != 0.0 {
-                nodes.touch(n);
-                nodes.force[n] += w * force;
-            }
-        }
     }
 }
 

@@ -824,7 +824,7 @@ fn results_do_not_depend_on_the_instruction_set() {
 /// materials or a plastic one is left to `finish` (false, nothing changed).
 #[test]
 fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
-    use super::grid_to_particle::{Finish, ParticleUpdate, CHUNK};
+    use super::grid_to_particle::{Chunk, Finish, ParticleUpdate, CHUNK};
     fn check<const D: usize>() {
         let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [10; D], 0.1).unwrap();
         sim.set_boundary(0, Side::Low, Boundary::Slip).unwrap();
@@ -880,7 +880,7 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             assert_eq!(alone[3].position[0], 0.0);
             let mut together = updates[..len].to_vec();
             let mut speeds = vec![Some(-1.0); len];
-            let chunk = super::Chunk {
+            let chunk = Chunk {
                 first: 0,
                 len,
                 source: None,
@@ -899,7 +899,7 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
         inverted[2].deformation_gradient[(1, 1)] = 1.0;
         let mut speeds = vec![None; CHUNK];
         let before = inverted.clone();
-        let [first, second] = [0, CHUNK].map(|first| super::Chunk {
+        let [first, second] = [0, CHUNK].map(|first| Chunk {
             first,
             len: CHUNK,
             source: None,
