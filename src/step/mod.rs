@@ -31,6 +31,8 @@ mod grid_update;
 mod musl;
 mod particle_to_grid;
 mod profile;
+#[cfg(test)]
+mod reference;
 mod surface;
 mod timestep;
 pub(crate) use profile::bytes as profile_bytes;

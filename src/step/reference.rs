@@ -1,0 +1,472 @@
+//! The reference step: the method of METHOD.md section 1 written plainly, serial and node by node,
+//! with none of the fast step's machinery (no bins, colours, factored stencils, lanes, SIMD or
+//! stored stencils). It is the oracle the fast step is tested against (`tests.rs`,
+//! `fast_step_matches_the_reference_step`): both must give the same particle state to round-off.
+//!
+//! It covers what the fast step does for nonnegative shape functions (linear hats, B-splines, RK
+//! of order 1) under material-point integration, one velocity field and gravity: every transfer
+//! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material. The wall
+//! conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`) and the stresses
+//! the materials' own: the oracle is for the schedule and the data layout, not for those.
+
+use crate::grid::{Grid, GridNodes};
+use crate::material::{block, embed3, pressure, Constitutive};
+use crate::options::{Shape, Transfer};
+use crate::sim::Sim;
+use crate::{Matrix, Vector};
+
+/// A particle's stencil: node indices, `Ψ_I(x_p)` and `∇Ψ_I(x_p)`.
+struct Stencil<const D: usize> {
+    nodes: Vec<usize>,
+    values: Vec<f64>,
+    gradients: Vec<Vector<D>>,
+}
+
+fn stencil<const D: usize>(sim: &Sim<D>, x: &Vector<D>) -> Stencil<D> {
+    let len = sim.shape.stencil_len();
+    let mut s = Stencil {
+        nodes: vec![0; len],
+        values: vec![0.0; len],
+        gradients: vec![Vector::zeros(); len],
+    };
+    sim.shape
+        .evaluate(&sim.grid, x, &mut s.nodes, &mut s.values, &mut s.gradients);
+    s
+}
+
+fn node_position<const D: usize>(grid: &Grid<D>, n: usize) -> Vector<D> {
+    grid.node_position(grid.node_multi_index(n))
+}
+
+/// Maps `m_p Ψ (v_p + C_p (x_I − x_p))` (and, with `forces`, `m_p Ψ` and the forces) of every
+/// particle to `nodes`. `velocity` and `affine` are the particles' own, or the new ones in
+/// MUSL's second map; `forces` is `(Δt, body accelerations)` (gravity added here).
+fn map_to_grid<const D: usize>(
+    sim: &Sim<D>,
+    stencils: &[Stencil<D>],
+    velocity: &[Vector<D>],
+    affine: &[Matrix<D>],
+    forces: Option<(f64, &[Vector<D>])>,
+    nodes: &mut GridNodes<D>,
+) {
+    let ps = &sim.particles;
+    let mls = matches!(sim.options.transfer, Transfer::Mls);
+    let inverse_inertia = sim.shape.apic_inertia(sim.grid.cell_size).map(|d| 1.0 / d);
+    for (p, s) in stencils.iter().enumerate() {
+        let m = ps.mass[p];
+        let volume = ps.volume(p);
+        let mut mv = m * velocity[p];
+        let mut mc = (!affine.is_empty()).then(|| m * affine[p]);
+        let mut internal = forces.map(|_| -volume * ps.stress[p]);
+        let mut body = forces.map(|(_, a)| sim.options.gravity + a[p]);
+        if let (true, Some((dt, _)), Some(b)) = (mls, forces, body) {
+            // MLS: the forces ride on the momentum (METHOD.md section 1).
+            mv += (dt * m) * b;
+            mc = mc.map(|mc| mc + (dt * inverse_inertia.unwrap()) * internal.unwrap());
+            (internal, body) = (None, None);
+        }
+        for ((&n, &w), g) in s.nodes.iter().zip(&s.values).zip(&s.gradients) {
+            if w == 0.0 && *g == Vector::<D>::zeros() {
+                continue;
+            }
+            nodes.touch(n);
+            let offset = node_position(&sim.grid, n) - ps.position[p];
+            let momentum = match mc {
+                Some(mc) => mv + mc * offset,
+                None => mv,
+            };
+            nodes.momentum[n] += w * momentum;
+            if forces.is_some() {
+                nodes.mass[n] += m * w;
+            }
+            if let Some(vs) = internal {
+                nodes.force[n] += vs * g;
+            }
+            if let Some(b) = body {
+                nodes.force[n] += (m * w) * b;
+            }
+        }
+    }
+}
+
+/// Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` (or `(mv)_I / m_I` for MUSL's second map, `dt =
+/// None`) with the wall conditions; nodes at or below `mass_floor` get no velocity.
+fn update_grid<const D: usize>(
+    sim: &Sim<D>,
+    nodes: &mut GridNodes<D>,
+    dt: Option<f64>,
+    mass_floor: f64,
+) {
+    let walls = &sim.options.walls;
+    walls.fold(&sim.grid, nodes, dt.is_some());
+    for k in 0..nodes.active.len() {
+        let n = nodes.active[k];
+        let m = nodes.mass[n];
+        if m <= mass_floor {
+            nodes.velocity[n] = Vector::zeros();
+            nodes.velocity_old[n] = Vector::zeros();
+            continue;
+        }
+        match dt {
+            Some(dt) => {
+                nodes.velocity_old[n] = nodes.momentum[n] / m;
+                nodes.velocity[n] = nodes.momentum[n] / m + dt * nodes.force[n] / m;
+            }
+            None => nodes.velocity[n] = nodes.momentum[n] / m,
+        }
+    }
+    walls.apply_friction(&sim.grid, nodes);
+    walls.unfold(&sim.grid, nodes);
+}
+
+/// `Σ_I Ψ_I v_I`, `Σ_I Ψ_I (v_I − v_old_I)`, `Σ_I Ψ_I v_I (x_I − x_p)ᵀ` and `Σ_I v_I ⊗ ∇Ψ_I`.
+fn gather<const D: usize>(
+    grid: &Grid<D>,
+    s: &Stencil<D>,
+    x: &Vector<D>,
+    nodes: &GridNodes<D>,
+) -> (Vector<D>, Vector<D>, Matrix<D>, Matrix<D>) {
+    let (mut v, mut dv, mut b, mut l) = (
+        Vector::<D>::zeros(),
+        Vector::<D>::zeros(),
+        Matrix::<D>::zeros(),
+        Matrix::<D>::zeros(),
+    );
+    for ((&n, &w), g) in s.nodes.iter().zip(&s.values).zip(&s.gradients) {
+        let vi = nodes.velocity[n];
+        v += w * vi;
+        dv += w * (vi - nodes.velocity_old[n]);
+        b += (w * vi) * (node_position(grid, n) - x).transpose();
+        l += vi * g.transpose();
+    }
+    (v, dv, b, l)
+}
+
+/// One step of `sim` by the reference method; the particles get the new state. Fails (with the
+/// particles unchanged) when a new state is not finite, inverted or outside the grid.
+pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate::Result<()> {
+    assert!(
+        sim.vc.is_none()
+            && sim.options.contact.is_none()
+            && sim.boundary.is_empty()
+            && !sim.shape.is_signed()
+            && sim
+                .materials
+                .iter()
+                .all(|m| m.rigid_velocity::<D>().is_none()),
+        "the reference step covers nonnegative shapes, material points and one field"
+    );
+    assert!(
+        sim.particles.in_id_order(),
+        "the reference step keeps particles in id order"
+    );
+    let mut acceleration = vec![Vector::<D>::zeros(); sim.particles.len()];
+    if let Some(bf) = sim.body_force.as_mut() {
+        let ps = &sim.particles;
+        bf.accelerations(
+            sim.time,
+            &ps.reference_position,
+            &ps.position,
+            &mut acceleration,
+        )
+        .map_err(|m| crate::Error::new(crate::ErrorKind::Callback, m))?;
+    }
+    let ps = &sim.particles;
+    let grid = &sim.grid;
+    let stencils: Vec<Stencil<D>> = ps.position.iter().map(|x| stencil(sim, x)).collect();
+    let mut nodes = GridNodes::<D>::default();
+    nodes.ensure(grid, false, false, false)?;
+
+    // Particle to grid, grid update.
+    let affine = &ps.affine;
+    map_to_grid(
+        sim,
+        &stencils,
+        &ps.velocity,
+        affine,
+        Some((dt, &acceleration)),
+        &mut nodes,
+    );
+    let largest_mass = ps.mass.iter().copied().fold(0.0, f64::max);
+    let floored = matches!(sim.options.shape, Shape::Linear);
+    let mass_floor = if floored { 1e-10 * largest_mass } else { 0.0 };
+    update_grid(sim, &mut nodes, Some(dt), mass_floor);
+
+    // Grid to particle.
+    let (flip, apic, mls) = match sim.options.transfer {
+        Transfer::PicFlip { flip } => (flip, false, false),
+        Transfer::Apic => (0.0, true, false),
+        Transfer::Mls => (0.0, true, true),
+    };
+    let inverse_inertia = sim.shape.apic_inertia(grid.cell_size).map(|d| 1.0 / d);
+    let n = ps.len();
+    let (mut x, mut v, mut c, mut l) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for (p, s) in stencils.iter().enumerate() {
+        let (v_pic, dv, b, gradient) = gather(grid, s, &ps.position[p], &nodes);
+        x.push(ps.position[p] + dt * v_pic);
+        v.push(match flip > 0.0 {
+            true => (1.0 - flip) * v_pic + flip * (ps.velocity[p] + dv),
+            false => v_pic,
+        });
+        let affine = inverse_inertia.map(|inv| b * inv);
+        let lp = match (mls, affine) {
+            (true, Some(c)) => c,
+            _ => gradient,
+        };
+        c.push(if apic {
+            affine.unwrap_or(lp)
+        } else {
+            Matrix::zeros()
+        });
+        l.push(lp);
+    }
+    if sim.options.scheme == crate::options::Scheme::Musl {
+        // The new momenta to the grid again; the velocity gradient from those velocities.
+        for &k in &nodes.active {
+            nodes.momentum[k] = Vector::zeros();
+        }
+        let new_affine = if apic { c.clone() } else { Vec::new() };
+        map_to_grid(sim, &stencils, &v, &new_affine, None, &mut nodes);
+        update_grid(sim, &mut nodes, None, mass_floor);
+        for (p, s) in stencils.iter().enumerate() {
+            let (_, _, b, gradient) = gather(grid, s, &ps.position[p], &nodes);
+            l[p] = match (mls, inverse_inertia) {
+                (true, Some(inv)) => b * inv,
+                _ => gradient,
+            };
+        }
+    }
+
+    // Constitutive update and checks.
+    let domain = grid.domain();
+    let mut new = ps.clone();
+    for p in 0..n {
+        let f = (Matrix::<D>::identity() + dt * l[p]) * ps.deformation_gradient[p];
+        let j = crate::determinant(&f);
+        let material = &sim.materials[ps.material[p] as usize];
+        let mut position = x[p];
+        if j.is_nan() || j <= 0.0 {
+            return Err(crate::Error::new(
+                crate::ErrorKind::InvertedParticle,
+                format!("particle {} inverted", ps.id[p]),
+            ));
+        }
+        let (stress, pressure_p) = if material.is_elastic() {
+            material.elastic_stress_and_wave_speed(&f, j).0
+        } else {
+            let df = embed3(&f) * embed3(&ps.deformation_gradient[p]).try_inverse().unwrap();
+            let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
+            new.plastic[p] = state;
+            (block(&s3), pressure(&s3))
+        };
+        if sim.options.walls.any_wall() {
+            sim.options.walls.clamp_to_walls(&domain, &mut position);
+        }
+        if !domain.contains(&position) || !stress.iter().all(|s| s.is_finite()) {
+            return Err(crate::Error::new(
+                crate::ErrorKind::OutsideGrid,
+                format!("particle {} outside or not finite", ps.id[p]),
+            ));
+        }
+        new.position[p] = position;
+        new.velocity[p] = v[p];
+        new.deformation_gradient[p] = f;
+        new.stress[p] = stress;
+        new.pressure[p] = pressure_p;
+        if apic {
+            new.affine[p] = c[p];
+        }
+    }
+    sim.particles = new;
+    sim.time += dt;
+    sim.steps += 1;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::options::{Boundary, Scheme, Side};
+    use crate::shape::UniformRng;
+    use crate::{Field, Material};
+    use proptest::prelude::*;
+
+    /// One random scene: the choices and the seed of its particles.
+    #[derive(Debug, Clone)]
+    struct Case {
+        seed: u64,
+        shape: usize,
+        transfer: usize,
+        flip: f64,
+        musl: bool,
+        walls: [usize; 6],
+        material: usize,
+        body_force: bool,
+    }
+
+    fn cases() -> impl Strategy<Value = Case> {
+        (
+            any::<u64>(),
+            0..4usize,
+            0..3usize,
+            0.0..1.0f64,
+            any::<bool>(),
+            prop::array::uniform6(0..4usize),
+            0..3usize,
+            any::<bool>(),
+        )
+            .prop_map(
+                |(seed, shape, transfer, flip, musl, walls, material, body_force)| Case {
+                    seed,
+                    shape,
+                    transfer,
+                    flip,
+                    musl,
+                    walls,
+                    material,
+                    body_force,
+                },
+            )
+    }
+
+    /// A block of jittered particles against the low faces, moving randomly under gravity,
+    /// with the options of `case`.
+    fn scene<const D: usize>(case: &Case) -> Sim<D> {
+        let cells = if D == 2 { 12 } else { 8 };
+        let h = 1.0 / cells as f64;
+        let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [cells; D], h).unwrap();
+        let shape = [
+            Shape::Linear,
+            Shape::BSpline2,
+            Shape::BSpline3,
+            Shape::Rk {
+                order: 1,
+                support: 2.0,
+            },
+        ][case.shape];
+        sim.set_shape(shape).unwrap();
+        let transfer = match case.transfer {
+            0 => Transfer::PicFlip { flip: case.flip },
+            2 if matches!(shape, Shape::BSpline2 | Shape::BSpline3) => Transfer::Mls,
+            _ => Transfer::Apic,
+        };
+        sim.set_transfer(transfer).unwrap();
+        let scheme = if case.musl { Scheme::Musl } else { Scheme::Usl };
+        sim.set_scheme(scheme).unwrap();
+        for a in 0..D {
+            for (k, side) in [Side::Low, Side::High].into_iter().enumerate() {
+                let wall = [
+                    Boundary::Free,
+                    Boundary::Fixed,
+                    Boundary::Slip,
+                    Boundary::Friction(0.3),
+                ][case.walls[2 * a + k]];
+                sim.set_boundary(a, side, wall).unwrap();
+            }
+        }
+        let mut g = Vector::<D>::zeros();
+        g[1] = -9.81;
+        sim.set_gravity(g).unwrap();
+        if case.body_force {
+            // A field that varies with time, the reference and the current position.
+            sim.set_body_force(Some(Box::new(
+                |t: f64, x0: &[Vector<D>], x: &[Vector<D>], out: &mut [Vector<D>]| {
+                    for ((a, x0), x) in out.iter_mut().zip(x0).zip(x) {
+                        *a = Vector::<D>::from_fn(|i, _| {
+                            (3.0 * x0[i] + t).sin() * 20.0 + 10.0 * x[(i + 1) % D]
+                        });
+                    }
+                    Ok(())
+                },
+            )));
+        }
+        let material = match case.material {
+            0 => Material::linear_elastic(1000.0, 1e5, 0.3),
+            1 => Material::neo_hookean(1000.0, 1e5, 0.3),
+            _ => Material::drucker_prager(1000.0, 1e5, 0.3, 30.0, 50.0, 0.0),
+        };
+        let id = sim.add_material(material.unwrap());
+        // Two particles per cell over the lower half of the grid, jittered by ±20 % of their
+        // spacing, on the low faces' first cells.
+        let q = h / 2.0;
+        let per_axis = cells;
+        let mut rng = UniformRng::new(case.seed);
+        let (mut x, mut v) = (Vec::new(), Vec::new());
+        for k in 0..per_axis.pow(D as u32) {
+            let mut xp = Vector::<D>::zeros();
+            let mut rest = k;
+            for a in 0..D {
+                let i = rest % per_axis;
+                rest /= per_axis;
+                xp[a] = (i as f64 + 0.5) * q + 0.4 * q * (rng.uniform() - 0.5);
+            }
+            x.push(xp);
+            v.push(Vector::<D>::from_fn(|_, _| rng.uniform() - 0.5));
+        }
+        let volumes = vec![q.powi(D as i32); x.len()];
+        sim.add_particles(id, &x, &volumes, Some(&v)).unwrap();
+        sim
+    }
+
+    /// The fast step against the reference step over four steps of one scene: positions,
+    /// velocities, `F` and stresses agree to round-off. The sums run in other orders (by blocks
+    /// and rows, factored per axis), so they agree to a few ulps of each quantity's scale per
+    /// step, which four steps and the stiff material's stresses amplify: the largest difference
+    /// over these cases is 7e-13 of the field's largest value (stresses), and the bound is
+    /// 1e-11. Dropping the friction walls' friction differs by 3e-3; scaling APIC's `B` by
+    /// `1 + 1e-7` differs by 1e-10.
+    fn same_steps<const D: usize>(case: &Case) -> std::result::Result<(), TestCaseError> {
+        let (mut fast, mut reference) = (scene::<D>(case), scene::<D>(case));
+        for _ in 0..4 {
+            let dt = fast.stable_dt(0.4).unwrap();
+            let (a, b) = (fast.step(dt), reference_step(&mut reference, dt));
+            prop_assert_eq!(a.is_ok(), b.is_ok(), "{:?} / {:?}", a, b);
+            if a.is_err() {
+                return Ok(());
+            }
+        }
+        for field in [
+            Field::Position,
+            Field::Velocity,
+            Field::DeformationGradient,
+            Field::Stress,
+        ] {
+            let (a, b) = (fast.field(field), reference.field(field));
+            let scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            prop_assert!(
+                worst <= 1e-11 * scale,
+                "{:?}: differs by {:e} of {:e}",
+                field,
+                worst,
+                scale
+            );
+        }
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        #[test]
+        fn fast_step_matches_the_reference_step_2d(case in cases()) {
+            same_steps::<2>(&case)?;
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+        #[test]
+        fn fast_step_matches_the_reference_step_3d(case in cases()) {
+            same_steps::<3>(&case)?;
+        }
+    }
+}
