@@ -351,3 +351,30 @@ mod tests {
         assert_eq!((o.shape, o.transfer), (Shape::BSpline2, Transfer::Apic));
     }
 }
+
+/// The fast paths of the step, one switch per simulation (`Sim::set_fast_paths`). Each is on by
+/// default; off, the step takes the plain path. Both paths compute the same method: the same
+/// bits for `vector_instructions`, the same up to the order of the node sums (round-off) for the
+/// others. Tests and benchmarks compare the two; a user has no reason to turn one off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FastPaths {
+    /// The particle loops compiled for AVX2 and FMA where the processor has them (and
+    /// `RKMPM_PORTABLE=1` is not set).
+    pub vector_instructions: bool,
+    /// B-spline stencils stored as 1D factors per axis (without VC), rather than node by node
+    /// as RK's.
+    pub factored_stencils: bool,
+    /// The particles' storage kept in the order of their grid blocks (`Particles`); off, it
+    /// stays in id order and scenes whose particles mix run slower.
+    pub particle_sorting: bool,
+}
+
+impl Default for FastPaths {
+    fn default() -> Self {
+        FastPaths {
+            vector_instructions: true,
+            factored_stencils: true,
+            particle_sorting: true,
+        }
+    }
+}

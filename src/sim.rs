@@ -4,7 +4,7 @@ use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
-use crate::options::{Boundary, Shape, Side};
+use crate::options::{Boundary, FastPaths, Shape, Side};
 pub use crate::options::{Integration, Options, Scheme, Transfer};
 use crate::particles::{Field, Particles};
 use crate::shape::ShapeFunction;
@@ -61,6 +61,7 @@ pub struct Sim<const D: usize> {
     pub(crate) time: f64,
     pub(crate) steps: u64,
     pub(crate) work: Workspace<D>,
+    pub(crate) fast_paths: FastPaths,
 }
 
 impl<const D: usize> Sim<D> {
@@ -87,6 +88,7 @@ impl<const D: usize> Sim<D> {
             time: 0.0,
             steps: 0,
             work: Workspace::default(),
+            fast_paths: FastPaths::default(),
         })
     }
 
@@ -129,19 +131,17 @@ impl<const D: usize> Sim<D> {
         }
     }
 
-    /// Stores the stencils of B-splines node by node, as RK's, instead of as 1D factors (the
-    /// results agree to round-off; benchmarks and tests compare the two).
-    #[doc(hidden)]
-    pub fn set_stored_stencils(&mut self, stored: bool) {
-        self.work.stored_stencils = stored;
+    /// Chooses the step's fast paths ([`FastPaths`]; all on by default). Off, a path gives the
+    /// same physics by the plain route: the same bits without vector instructions; node sums
+    /// taken in another order (round-off) with stored stencils or without particle sorting.
+    /// Any time, also between steps.
+    pub fn set_fast_paths(&mut self, paths: FastPaths) {
+        self.fast_paths = paths;
     }
 
-    /// Whether the steps keep the particles stored in the order of their grid blocks (on by
-    /// default; see [`Particles`]). Off, the storage stays in id order: the results are the
-    /// same physics (node sums taken in another order, so they differ by round-off once
-    /// particles have been sorted), and scenes whose particles mix run slower (BENCHMARKS.md).
-    pub fn set_particle_sorting(&mut self, on: bool) {
-        self.work.keep_order = !on;
+    /// The step's fast paths.
+    pub fn fast_paths(&self) -> FastPaths {
+        self.fast_paths
     }
 
     /// Chooses the shape function. Before stepping only.
@@ -514,7 +514,7 @@ impl<const D: usize> Sim<D> {
         &self.options
     }
     /// The particles, in storage order: sorted by grid block as the steps go
-    /// ([`Sim::set_particle_sorting`]); `Particles::id` gives each slot's id, and
+    /// ([`Sim::set_fast_paths`]); `Particles::id` gives each slot's id, and
     /// [`Sim::field`] is in id order.
     pub fn particles(&self) -> &Particles<D> {
         &self.particles

@@ -245,8 +245,11 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     }
     let vol = vec![(h / 2.0).powi(D as i32); total];
     sim.add_particles(mat, &x, &vol, Some(&v)).map_err(e)?;
-    sim.set_stored_stencils(a.stored);
-    sim.set_particle_sorting(a.sort);
+    sim.set_fast_paths(rkmpm::options::FastPaths {
+        factored_stencils: !a.stored,
+        particle_sorting: a.sort,
+        ..Default::default()
+    });
     drop((x, v, vol));
     for _ in 0..a.warmup {
         sim.step(dt).map_err(e)?;

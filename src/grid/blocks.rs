@@ -318,9 +318,9 @@ impl<const D: usize> Bins<D> {
     /// the particles in `order` (`step::Reorder`: in grid to particle under USL, by
     /// [`crate::particles::Particles::permute`] at the commit otherwise), after which `order`
     /// is one run per block's worth of particles until they move to other blocks.
-    pub fn is_scattered(&self) -> bool {
+    pub fn is_scattered(&self, lanes: crate::cpu::Lanes) -> bool {
         let (order, next) = (&self.order[..], self.order.get(1..).unwrap_or_default());
-        let breaks: usize = crate::cpu::wide(
+        let breaks: usize = lanes.wide(
             #[inline(always)]
             || {
                 let steps = order.iter().zip(next);

@@ -184,7 +184,7 @@ impl BSpline {
     /// origin (the scalar code takes those).
     ///
     /// # Safety
-    /// The processor has AVX2 (the caller runs this inside [`crate::cpu::wide`]).
+    /// The processor has AVX2 (the caller runs this inside [`crate::cpu::Lanes::wide`]).
     #[cfg(target_arch = "x86_64")]
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
@@ -342,7 +342,7 @@ impl BSpline {
 /// phase's samples on an Intel Xeon (BENCHMARKS.md).
 ///
 /// # Safety
-/// The processor has AVX2 (inside [`crate::cpu::wide`]).
+/// The processor has AVX2 (inside [`crate::cpu::Lanes::wide`]).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 unsafe fn store_transposed<const D: usize, const W: usize>(

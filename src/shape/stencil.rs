@@ -12,6 +12,7 @@
 
 use super::bspline::{tensor_product, BSpline};
 use super::ShapeFunction;
+use crate::cpu::Lanes;
 use crate::grid::BlockLayout;
 use crate::grid::{scatter_add, Grid, NodeScatter};
 use crate::{Matrix, Vector};
@@ -87,6 +88,9 @@ pub trait StencilView<const D: usize>: Sync {
 
     /// See [`StencilView::Local`].
     fn local(&self) -> Self::Local<'_>;
+
+    /// The instruction set of the loops that read these stencils.
+    fn lanes(&self) -> Lanes;
 
     /// Calls `f(s, node)` for every slot `s` of the stencil of particle `p` (slots may have zero
     /// value and gradient).
@@ -188,6 +192,8 @@ pub struct Stencils<const D: usize> {
     /// The transfer weights of signed shape functions (`step::edge_lumping`), which
     /// [`StencilView::for_each`] gives in place of `values` when they are set; empty otherwise.
     pub transfer: Vec<f64>,
+    /// The instruction set of the loops that read these stencils.
+    pub lanes: Lanes,
 }
 
 impl<const D: usize> Stencils<D> {
@@ -277,6 +283,11 @@ impl<const D: usize> StencilView<D> for Stencils<D> {
         self
     }
 
+    #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        self.lanes
+    }
+
     /// The transfer weights when they are set, else `Ψ`.
     #[inline(always)]
     fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
@@ -311,6 +322,11 @@ impl<const D: usize> StencilView<D> for &Stencils<D> {
     }
 
     #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        self.lanes
+    }
+
+    #[inline(always)]
     fn for_each(&self, p: usize, f: impl FnMut(usize, StencilNode<D>)) {
         (**self).for_each(p, f)
     }
@@ -340,6 +356,8 @@ pub struct TensorStencils<const D: usize, const W: usize> {
     /// Grid block of each particle under the layout of the last `compute_with`
     /// ([`BlockLayout::key`] of its first node), for the bins.
     keys: Vec<u32>,
+    /// The instruction set of `compute_with` and of the loops that read these stencils.
+    pub lanes: Lanes,
 }
 
 /// A particle's stencil as a transfer reads it ([`TensorView::factors`]).
@@ -360,6 +378,7 @@ pub struct TensorView<'a, const D: usize, const W: usize> {
     zero_index: usize,
     values: &'a [[[f64; W]; D]],
     derivatives: &'a [[[f64; W]; D]],
+    lanes: Lanes,
 }
 
 impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
@@ -373,6 +392,7 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
             values: Vec::new(),
             derivatives: Vec::new(),
             keys: Vec::new(),
+            lanes: Lanes::default(),
         }
     }
 }
@@ -415,7 +435,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         self.keys.resize(n, 0);
 
         // First node, its storage index and the values; the factors for the derivatives. In
-        // chunks, each compiled for the processor's vector instructions (`cpu::wide`).
+        // chunks, each compiled for the processor's vector instructions (`Lanes::wide`).
         const CHUNK: usize = 1024;
         let derivatives = if derivatives {
             self.derivatives.resize(n, [[0.0; W]; D]);
@@ -426,6 +446,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         };
         // A chunk of particles: four at a time as vector lanes (`BSpline::factors_4`) when the
         // processor has AVX2, the rest one by one; the same bits either way.
+        let lanes = self.lanes;
         let fill = crate::cpu::inlined(
             #[inline(always)]
             |first: &mut [[i32; D]],
@@ -436,10 +457,10 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                 let n = x.len();
                 let mut i = 0;
                 while i < n {
-                    let lanes = i + 4 <= n && crate::cpu::has_avx2();
-                    // SAFETY: the processor has AVX2 (`has_avx2`).
+                    let four = i + 4 <= n && lanes.avx2();
+                    // SAFETY: the processor has AVX2 (`Lanes::avx2`).
                     #[cfg(target_arch = "x86_64")]
-                    let lanes = lanes
+                    let four = four
                         && unsafe {
                             shape.factors_4(
                                 grid,
@@ -449,9 +470,9 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
                                 dw.as_deref_mut().map(|d| &mut d[i..i + 4]),
                             )
                         };
-                    let end = if lanes { i + 4 } else { i + 1 };
+                    let end = if four { i + 4 } else { i + 1 };
                     for q in i..end {
-                        if !lanes {
+                        if !four {
                             let dw = dw.as_deref_mut().map(|d| &mut d[q]);
                             let mut wide_first = [0i64; D];
                             shape.factors_into(grid, &x[q], &mut wide_first, &mut w[q], dw);
@@ -474,14 +495,14 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
         match derivatives {
             Some(derivatives) => chunks.zip(derivatives.par_chunks_mut(CHUNK)).for_each(
                 |((((first, keys), w), x), dw)| {
-                    crate::cpu::wide(
+                    lanes.wide(
                         #[inline(always)]
                         || fill(first, keys, w, x, Some(dw)),
                     )
                 },
             ),
             None => chunks.for_each(|(((first, keys), w), x)| {
-                crate::cpu::wide(
+                lanes.wide(
                     #[inline(always)]
                     || fill(first, keys, w, x, None),
                 )
@@ -738,6 +759,7 @@ impl<const D: usize, const W: usize> TensorStencils<D, W> {
             zero_index: self.zero_index,
             values: &self.values,
             derivatives: &self.derivatives,
+            lanes: self.lanes,
         }
     }
 }
@@ -751,6 +773,11 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
     #[inline(always)]
     fn local(&self) -> Self {
         *self
+    }
+
+    #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        self.lanes
     }
 
     #[inline(always)]
@@ -828,12 +855,12 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
         gradient: bool,
     ) -> Gathered<D> {
         #[cfg(target_arch = "x86_64")]
-        if D == 3 && crate::cpu::has_avx2() {
+        if D == 3 && self.lanes.avx2() {
             // SAFETY: with `D == 3` the types are the same; the processor has AVX2 and FMA.
             return unsafe { avx2::gather_3d(self, p, xp, v, v_old, affine, gradient) };
         }
         #[cfg(target_arch = "x86_64")]
-        if D == 2 && W <= 4 && crate::cpu::has_avx2() {
+        if D == 2 && W <= 4 && self.lanes.avx2() {
             // SAFETY: as above, with `D == 2` and `W ≤ 4`.
             return unsafe { avx2::gather_2d(self, p, xp, v, v_old, affine, gradient) };
         }
@@ -944,9 +971,9 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
 /// (`results_do_not_depend_on_the_instruction_set` checks it).
 ///
 /// The functions are `#[inline(always)]` and not `#[target_feature]` (which cannot be): inlined
-/// into the body [`crate::cpu::wide`] compiles for AVX2, the intrinsics become AVX2
+/// into the body [`crate::cpu::Lanes::wide`] compiles for AVX2, the intrinsics become AVX2
 /// instructions there (out of line, behind a `#[target_feature]` call, most of the gain is
-/// lost). The caller takes this path only when `cpu::has_avx2()`.
+/// lost). The caller takes this path only when `Lanes::avx2()`.
 ///
 /// The 2D gather (`gather_2d`) puts two nodes of a row in one register.
 #[cfg(target_arch = "x86_64")]

@@ -372,7 +372,8 @@ fn stencils_lie_in_their_box_and_factors_give_the_stored_bits() {
 #[test]
 fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
     fn check<const D: usize, const W: usize>(order: BSplineOrder) {
-        if !crate::cpu::has_avx2() {
+        let lanes = crate::cpu::Lanes::detect();
+        if !lanes.avx2() {
             eprintln!("no AVX2 here: the lanes are not taken");
             return;
         }
@@ -404,7 +405,7 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
             let mut derivatives = [[[0.0; W]; D]; 4];
             // SAFETY: the processor has AVX2.
             let taken = unsafe {
-                crate::cpu::wide(|| {
+                lanes.wide(|| {
                     shape.factors_4(&grid, x, &mut first, &mut values, Some(&mut derivatives))
                 })
             };
@@ -430,9 +431,8 @@ fn bspline_factors_as_lanes_give_the_bits_of_one_at_a_time() {
             let mut first = [[7i32; D]; 4];
             let mut values = [[[7.0; W]; D]; 4];
             // SAFETY: as above.
-            let taken = unsafe {
-                crate::cpu::wide(|| shape.factors_4(&grid, &x, &mut first, &mut values, None))
-            };
+            let taken =
+                unsafe { lanes.wide(|| shape.factors_4(&grid, &x, &mut first, &mut values, None)) };
             assert!(!taken, "{order:?} took {bad}");
             assert_eq!((first, values), ([[7i32; D]; 4], [[[7.0; W]; D]; 4]));
         }

@@ -1,6 +1,7 @@
 //! Grid to particle: velocity (PIC/FLIP blend or APIC), position, velocity gradient and `F`.
 
 use super::TransferPlan;
+use crate::cpu::Lanes;
 use crate::error::ErrorKind;
 use crate::grid::{DomainBox, Grid, GridNodes, SharedSlice};
 use crate::material::PlasticState;
@@ -133,21 +134,21 @@ impl<const D: usize> NewStateWriter<'_, D> {
     }
 
     /// Asks for the cache lines of particles `p .. p + n`'s new state, for writing
-    /// ([`crate::cpu::prefetch_for_write`]); nothing past the end.
+    /// ([`Lanes::prefetch_for_write`]); nothing past the end.
     #[inline(always)]
-    pub fn prefetch_for_write(&self, p: usize, n: usize) {
+    pub fn prefetch_for_write(&self, lanes: Lanes, p: usize, n: usize) {
         #[inline(always)]
-        fn lines<T>(s: &SharedSlice<'_, T>, p: usize, n: usize) {
+        fn lines<T>(lanes: Lanes, s: &SharedSlice<'_, T>, p: usize, n: usize) {
             if p + n <= s.len() {
-                crate::cpu::prefetch_for_write(s.as_ptr_at(p), n);
+                lanes.prefetch_for_write(s.as_ptr_at(p), n);
             }
         }
-        lines(&self.position, p, n);
-        lines(&self.velocity, p, n);
-        lines(&self.affine, p, n);
-        lines(&self.deformation_gradient, p, n);
-        lines(&self.stress, p, n);
-        lines(&self.pressure, p, n);
+        lines(lanes, &self.position, p, n);
+        lines(lanes, &self.velocity, p, n);
+        lines(lanes, &self.affine, p, n);
+        lines(lanes, &self.deformation_gradient, p, n);
+        lines(lanes, &self.stress, p, n);
+        lines(lanes, &self.pressure, p, n);
     }
 
     /// Particle `p`'s new state as stored.
@@ -431,6 +432,7 @@ where
     // Slices and plain values captured by value, as in particle to grid, so that the compiler
     // keeps them in registers.
     let stencils = stencils.local();
+    let lanes = stencils.lanes();
     let (position, material, velocity, deformation_gradient) = (
         &ps.position[..],
         &ps.material[..],
@@ -500,13 +502,13 @@ where
         .par_chunks_mut(CHUNK)
         .enumerate()
         .map_init(PlasticState::default, |scratch, (c, ok)| {
-            crate::cpu::wide(
+            lanes.wide(
                 #[inline(always)]
                 || {
                     let first = c * CHUNK;
                     let n = ok.len();
                     // The lines this task writes a few chunks on (`AHEAD`).
-                    writer.prefetch_for_write(first + AHEAD * CHUNK, CHUNK);
+                    writer.prefetch_for_write(lanes, first + AHEAD * CHUNK, CHUNK);
                     let chunk = Chunk {
                         first,
                         len: n,

@@ -48,6 +48,7 @@ pub use grid_to_particle::{
 pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
 
+use crate::cpu::Lanes;
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
@@ -73,10 +74,6 @@ pub struct Workspace<const D: usize> {
     pub linear: TensorStencils<D, 2>,
     pub quadratic: TensorStencils<D, 3>,
     pub cubic: TensorStencils<D, 4>,
-    /// Use stored stencils for B-splines too (tests and benchmarks compare the two).
-    pub stored_stencils: bool,
-    /// Particles left in id order (`Sim::set_particle_sorting(false)`).
-    pub keep_order: bool,
     /// Buffers of the particles' sort.
     pub spare: crate::particles::SpareArrays<D>,
     /// How the step being taken stores its particles in block order (decided with its bins).
@@ -363,7 +360,7 @@ impl<const D: usize> Sim<D> {
             Shape::BSpline3 => Some(BSplineOrder::Cubic),
             Shape::Rk { .. } => None,
         }
-        .filter(|_| self.vc.is_none() && !work.stored_stencils);
+        .filter(|_| self.vc.is_none() && self.fast_paths.factored_stencils);
         match order {
             Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
@@ -379,6 +376,7 @@ impl<const D: usize> Sim<D> {
                 );
                 self.work.times.bins += lap(&mut clock);
                 let mut stencils = std::mem::take(&mut self.work.stencils);
+                stencils.lanes = Lanes::chosen(self.fast_paths.vector_instructions);
                 stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);
                 if self.shape.is_signed() {
                     self.blend_transfer_weights(&mut stencils);
@@ -424,6 +422,7 @@ impl<const D: usize> Sim<D> {
             _ => BSplineOrder::Cubic,
         };
         let mut stencils = std::mem::take(storage(&mut self.work));
+        stencils.lanes = Lanes::chosen(self.fast_paths.vector_instructions);
         // MLS reads no shape-function gradient, except for the mass gradient of contact.
         let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
         // The particles' blocks are found with the factors, from their stencils' first nodes.
@@ -465,7 +464,8 @@ impl<const D: usize> Sim<D> {
             self.materials.iter().map(|m| m.rigid_velocity()).collect();
         let mut clock = std::time::Instant::now();
         // Whether to store the particles in block order this step (with the bins' time).
-        let scattered = !work.keep_order && work.bins.is_scattered();
+        let lanes = Lanes::chosen(self.fast_paths.vector_instructions);
+        let scattered = self.fast_paths.particle_sorting && work.bins.is_scattered(lanes);
         work.times.bins += lap(&mut clock);
 
         // 2. Body forces (evaluated by `step` before the pool took over).

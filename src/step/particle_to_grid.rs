@@ -83,6 +83,7 @@ where
     let (deformation_gradient, reference_volume) =
         (&ps.deformation_gradient[..], &ps.reference_volume[..]);
     let stencils = stencils.local();
+    let lanes = stencils.lanes();
     let scatter = crate::cpu::inlined(
         #[inline(always)]
         move |p: usize| {
@@ -177,7 +178,7 @@ where
     let largest_mass = bins.run_tasks(
         || 0.0f64,
         |range| {
-            crate::cpu::wide(
+            lanes.wide(
                 #[inline(always)]
                 || {
                     // A copy in this task (see above), not a reference to the shared one.

@@ -3,7 +3,7 @@
 
 use crate::error::ErrorKind;
 use crate::material::{Material, PlasticState};
-use crate::options::{Boundary, Scheme, Shape, Side, Transfer};
+use crate::options::{Boundary, FastPaths, Scheme, Shape, Side, Transfer};
 use crate::particles::{Field, Particles};
 use crate::scenes::{run_vibrating_bar, VibratingBar};
 use crate::sim::Sim;
@@ -494,7 +494,10 @@ fn a_rejected_sorting_step_names_the_particle_by_id() {
     let (x, q) = (block_by_columns(), BY_COLUMNS_SPACING);
     let named = |sort: bool| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
-        sim.set_particle_sorting(sort);
+        sim.set_fast_paths(FastPaths {
+            particle_sorting: sort,
+            ..FastPaths::default()
+        });
         let m = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
         sim.add_particles(m, &x, &vec![q * q; x.len()], None)
             .unwrap();
@@ -750,7 +753,7 @@ fn results_do_not_depend_on_the_thread_count() {
 }
 
 /// Results do not depend on the instruction set: the particle loops compiled for AVX2 and FMA
-/// (`cpu::wide`) give the same particle data bit for bit as the baseline code, for B-splines
+/// (`Lanes::wide`) give the same particle data bit for bit as the baseline code, for B-splines
 /// with APIC, MLS and PIC/FLIP (the factored scatter and gather, the 3D gather in AVX2
 /// registers, the shape factors, the constitutive update), elastic and with Drucker–Prager, in
 /// 2D and 3D. On a processor without AVX2 both runs
@@ -763,7 +766,6 @@ fn results_do_not_depend_on_the_instruction_set() {
         transfer: Transfer,
         plastic: bool,
     ) -> Particles<D> {
-        crate::cpu::use_baseline(baseline);
         // A soil weak enough that the spinning block yields.
         let material = if plastic {
             Material::drucker_prager(1000.0, YOUNG, 0.3, 30.0, 1.0, 0.0).unwrap()
@@ -771,6 +773,10 @@ fn results_do_not_depend_on_the_instruction_set() {
             Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap()
         };
         let mut sim = block_of::<D>(shape, transfer, material, true);
+        sim.set_fast_paths(FastPaths {
+            vector_instructions: !baseline,
+            ..FastPaths::default()
+        });
         sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
         let dt = sim.stable_dt(0.3).unwrap();
         for _ in 0..15 {
@@ -786,7 +792,7 @@ fn results_do_not_depend_on_the_instruction_set() {
         }
         sim.particles().clone()
     }
-    if !crate::cpu::has_avx2() {
+    if !crate::cpu::Lanes::detect().avx2() {
         eprintln!("no AVX2 and FMA here: both runs take the baseline code");
     }
     let flip = Transfer::PicFlip { flip: 0.95 };
@@ -1031,7 +1037,10 @@ fn factored_and_stored_stencils_agree_to_round_off() {
             sim.set_scheme(Scheme::Musl).unwrap();
         }
         sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
-        sim.set_stored_stencils(stored);
+        sim.set_fast_paths(FastPaths {
+            factored_stencils: !stored,
+            ..FastPaths::default()
+        });
         let dt = sim.stable_dt(0.3).unwrap();
         for _ in 0..8 {
             sim.step(dt).unwrap();
@@ -1354,7 +1363,10 @@ fn sorting_the_particles_changes_only_round_off() {
     let (added, q) = (block_by_columns(), BY_COLUMNS_SPACING);
     let run = |sort: bool| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [32, 32], 1.0 / 32.0).unwrap();
-        sim.set_particle_sorting(sort);
+        sim.set_fast_paths(FastPaths {
+            particle_sorting: sort,
+            ..FastPaths::default()
+        });
         let m = sim.add_material(Material::neo_hookean(1000.0, YOUNG, 0.3).unwrap());
         let v: Vec<Vector<2>> = added
             .iter()
@@ -1386,7 +1398,7 @@ fn sorting_the_particles_changes_only_round_off() {
         !sorted.particles().in_id_order(),
         "the particles were not sorted"
     );
-    assert!(!sorted.work.bins.is_scattered());
+    assert!(!sorted.work.bins.is_scattered(crate::cpu::Lanes::BASELINE));
     // Round-off of sums of a few dozen O(1) terms per node, over 20 steps.
     for field in [Field::Position, Field::Velocity, Field::Stress] {
         let (a, b) = (sorted.field(field), unsorted.field(field));
