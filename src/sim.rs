@@ -124,7 +124,7 @@ impl<const D: usize> Sim<D> {
                 + w.new_state.bytes()
                 + w.spare.bytes()
                 + bytes(&w.admissible),
-            grid: w.nodes.bytes() + w.bodies.iter().map(|b| b.bytes()).sum::<usize>(),
+            grid: w.nodes.bytes() + w.bodies.nodes.iter().map(|b| b.bytes()).sum::<usize>(),
             active_nodes: w.active_nodes,
             particle_count: self.particles.len(),
             node_count: self.grid.node_count(),

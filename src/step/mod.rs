@@ -24,7 +24,9 @@
 //! so a failed step leaves the last good state.
 //! [`PhaseTimes`] accumulates the time per phase.
 
+mod checks;
 mod constitutive_update;
+mod contact;
 mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
@@ -51,7 +53,7 @@ pub use particle_to_grid::{particle_to_grid, Forces};
 use crate::cpu::Lanes;
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::grid::{Grid, GridNodes};
-use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::integration::BoundaryPoints;
 use crate::material::Constitutive;
 use crate::options::{Scheme, Shape, Transfer, Walls};
 use crate::particles::Particles;
@@ -59,9 +61,10 @@ use crate::shape::{BSpline, BSplineOrder, StencilView, Stencils, TensorStencils}
 use crate::sim::Sim;
 use crate::Vector;
 use constitutive_update::ConstitutiveUpdate;
+pub use contact::BodyFields;
 use rayon::prelude::*;
 pub use surface::BoundaryUpdate;
-use surface::{apply_tractions, found_surface, move_boundary_points, settle_boundary_points};
+use surface::{apply_tractions, found_surface, move_boundary_points};
 
 /// Scratch space of a step, kept between steps so the hot loops do not allocate.
 #[derive(Debug, Default)]
@@ -94,12 +97,8 @@ pub struct Workspace<const D: usize> {
     pub volumes: Vec<f64>,
     pub boundary_updates: Vec<BoundaryUpdate<D>>,
     pub nodes: GridNodes<D>,
-    /// One node field per body (material) under contact; empty otherwise.
-    pub bodies: Vec<GridNodes<D>>,
-    /// One VC correction per body under contact with VC; empty otherwise.
-    pub body_vc: Vec<VcCorrection<D>>,
-    /// Nodes touched by more than one body this step (contact).
-    pub shared: Vec<usize>,
+    /// The bodies' node fields under contact; empty otherwise.
+    pub bodies: BodyFields<D>,
     pub body_acceleration: Vec<Vector<D>>,
     /// The new particle state, swapped in by the commit.
     pub new_state: NewState<D>,
@@ -347,8 +346,9 @@ impl<const D: usize> Sim<D> {
             .ensure(grid, signed, false, signed || self.vc.is_some())?;
         if self.options.contact.is_some() {
             work.bodies
+                .nodes
                 .resize_with(self.materials.len(), GridNodes::default);
-            for b in work.bodies.iter_mut() {
+            for b in work.bodies.nodes.iter_mut() {
                 b.ensure(grid, signed, true, signed || self.vc.is_some())?;
             }
         }
@@ -395,7 +395,7 @@ impl<const D: usize> Sim<D> {
         let (grid, walls, ps) = (&self.grid, &self.options.walls, &self.particles);
         let work = &mut self.work;
         if self.options.contact.is_some() {
-            for (b, nodes) in work.bodies.iter_mut().enumerate() {
+            for (b, nodes) in work.bodies.nodes.iter_mut().enumerate() {
                 edge_lumping::blend_transfer_weights(
                     grid,
                     walls,
@@ -430,7 +430,7 @@ impl<const D: usize> Sim<D> {
         let (grid, position) = (&self.grid, &self.particles.position);
         let work = &mut self.work;
         let (bins, times) = (&mut work.bins, &mut work.times);
-        let (nodes, bodies) = (&mut work.nodes, &mut work.bodies);
+        let (nodes, bodies) = (&mut work.nodes, &mut work.bodies.nodes);
         let mut clock = std::time::Instant::now();
         stencils.compute_with(&BSpline::new(order), grid, position, derivatives, &layout);
         times.shape += lap(&mut clock);
@@ -496,16 +496,16 @@ impl<const D: usize> Sim<D> {
         // VC corrections of the test-function gradients (per body under contact, below).
         if self.vc.is_none() || contact.is_none() {
             // No per-body corrections left from a step that had them.
-            work.body_vc.clear();
+            work.bodies.vc.clear();
         }
         if let Some(vc) = self.vc.as_ref() {
             work.volumes.clear();
             work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
             if contact.is_some()
-                && (work.body_vc.len() != self.materials.len()
-                    || work.body_vc.iter().any(|c| c.order != vc.order))
+                && (work.bodies.vc.len() != self.materials.len()
+                    || work.bodies.vc.iter().any(|c| c.order != vc.order))
             {
-                work.body_vc = vec![vc.clone(); self.materials.len()];
+                work.bodies.vc = vec![vc.clone(); self.materials.len()];
             }
         }
         if let Some(vc) = self.vc.as_mut().filter(|_| contact.is_none()) {
@@ -545,40 +545,39 @@ impl<const D: usize> Sim<D> {
         // cubic B-spline block drifted by 1e-10 of M·v in 1000 steps).
         let floored =
             self.shape.is_signed() || matches!(self.options.shape, crate::shape::Shape::Linear);
-        let floor_of = move |largest_mass: f64| if floored { 1e-10 * largest_mass } else { 0.0 };
-        let mut mass_floor = 0.0;
+        let mass_floor_fraction = if floored { 1e-10 } else { 0.0 };
+        let inputs = StepInputs {
+            grid,
+            particles: ps,
+            stencils,
+            bins: &work.bins,
+            walls: &self.options.walls,
+            plan,
+            dt,
+        };
         // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
         let mut body_surfaces = BoundaryPoints::default();
+        let mass_floor;
         if let Some(contact) = contact {
-            for (b, nodes) in work.bodies.iter_mut().enumerate() {
-                // VC of a deformable body: its surface and its correction on its own field.
-                let vc = match work.body_vc.get_mut(b).filter(|_| rigid[b].is_none()) {
-                    Some(vc) => {
-                        let surface = found_surface(grid, ps, Some(b as u32))?;
-                        work.times.surface += lap(&mut clock);
-                        work.boundary_stencils.compute(
-                            self.shape.as_ref(),
-                            grid,
-                            &surface.position,
-                        );
-                        vc.compute(
-                            grid,
-                            &work.bins,
-                            &ps.position,
-                            &work.volumes,
-                            stored.expect("VC runs with stored stencils"),
-                            &surface,
-                            &work.boundary_stencils,
-                            nodes,
-                            Some((&ps.material, b as u32)),
-                        );
-                        body_surfaces.add(&surface.position, &surface.area_normal, None)?;
-                        work.times.forces_and_vc += lap(&mut clock);
-                        Some(&*vc)
-                    }
-                    None => None,
-                };
-                mass_floor = floor_of(particle_to_grid(
+            let body_inputs = contact::BodyInputs {
+                contact,
+                rigid: &rigid,
+                forces,
+                stored,
+                shape: self.shape.as_ref(),
+                volumes: &work.volumes,
+                mass_floor_fraction,
+            };
+            (mass_floor, body_surfaces) = contact::particle_to_grid_per_body(
+                &inputs,
+                &body_inputs,
+                &mut work.bodies,
+                &mut work.boundary_stencils,
+                &mut work.times,
+            )?;
+        } else {
+            mass_floor = mass_floor_fraction
+                * particle_to_grid(
                     grid,
                     ps,
                     &work.bins,
@@ -586,55 +585,10 @@ impl<const D: usize> Sim<D> {
                     stored,
                     velocity,
                     affine_map,
-                    Some(Forces { vc, ..forces }),
-                    Some(b as u32),
-                    nodes,
-                ));
-                // 4. Grid update per body, then the contact correction where bodies meet.
-                grid_update(
-                    grid,
-                    &self.options.walls,
-                    nodes,
-                    Some(dt),
-                    mass_floor,
-                    false,
+                    Some(forces),
+                    None,
+                    &mut work.nodes,
                 );
-                if let Some(v) = rigid[b] {
-                    for &n in &nodes.active {
-                        nodes.velocity[n] = v;
-                        nodes.velocity_old[n] = v;
-                    }
-                }
-            }
-            work.shared.clear();
-            for &n in &work.bodies[0].active {
-                if work.bodies[1..].iter().any(|b| b.is_touched(n)) {
-                    work.shared.push(n);
-                }
-            }
-            for (k, body) in work.bodies.iter().enumerate().skip(1) {
-                for &n in &body.active {
-                    if !work.bodies[..k].iter().any(|b| b.is_touched(n))
-                        && work.bodies[k + 1..].iter().any(|b| b.is_touched(n))
-                    {
-                        work.shared.push(n);
-                    }
-                }
-            }
-            crate::contact::correct_velocities(&contact, &mut work.bodies, &rigid, &work.shared);
-        } else {
-            mass_floor = floor_of(particle_to_grid(
-                grid,
-                ps,
-                &work.bins,
-                stencils,
-                stored,
-                velocity,
-                affine_map,
-                Some(forces),
-                None,
-                &mut work.nodes,
-            ));
             if boundary.has_tractions() {
                 apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
             }
@@ -676,7 +630,7 @@ impl<const D: usize> Sim<D> {
         };
         let source = (work.reorder == Reorder::InGather).then_some(&work.bins.order[..]);
         let fields = if contact.is_some() {
-            Fields::PerBody(&work.bodies, &ps.material)
+            Fields::PerBody(&work.bodies.nodes, &ps.material)
         } else {
             Fields::One(&work.nodes)
         };
@@ -696,15 +650,6 @@ impl<const D: usize> Sim<D> {
         if !usl {
             // MUSL: the new particle momenta mapped to the grid again, and `F` from those
             // grid velocities.
-            let inputs = StepInputs {
-                grid,
-                particles: ps,
-                stencils,
-                bins: &work.bins,
-                walls: &self.options.walls,
-                plan,
-                dt,
-            };
             musl::second_map(&inputs, mass_floor, &mut work.nodes, &mut new);
         }
 
@@ -722,42 +667,23 @@ impl<const D: usize> Sim<D> {
             work.times.constitutive += lap(&mut clock);
         }
 
-        // Checks: the first bad particle (lowest id) is reported; slot `k` of the new state
-        // holds particle `source[k]`.
-        let id_of = |k: usize| ps.id[source.map_or(k, |s| s[k] as usize)];
-        let bad = match all_admissible {
-            true => None,
-            false => admissible
-                .iter()
-                .enumerate()
-                .filter(|(_, ok)| !**ok)
-                .min_by_key(|&(k, _)| id_of(k))
-                .map(|(k, _)| k),
+        // Checks: the first bad particle (lowest id), then the boundary points.
+        let label = checks::StepLabel {
+            number: self.steps + 1,
+            time: self.time,
         };
         work.admissible = admissible;
-        if let Some(k) = bad {
-            let (kind, what) = new.get(k).check(&grid.domain()).unwrap_err();
-            let id = id_of(k);
-            let message = format!(
-                "step {} (t = {:e}, dt = {dt:e}) rejected: particle {id} {what}; the simulation keeps its last good state",
-                self.steps + 1,
-                self.time
-            );
-            work.new_state = new;
-            work.boundary_updates = boundary_updates;
-            return Err(Error::new(kind, message));
+        let rejected = match all_admissible {
+            true => None,
+            false => {
+                checks::first_rejected_particle(&inputs, label, &new, &work.admissible, source)
+            }
         }
-        let bad =
-            settle_boundary_points(&self.options.walls, &grid.domain(), &mut boundary_updates);
-        if let Some((b, what)) = bad {
-            let message = format!(
-                "step {} (t = {:e}, dt = {dt:e}) rejected: boundary point {b} {what}",
-                self.steps + 1,
-                self.time
-            );
+        .or_else(|| checks::settle_boundary_points(&inputs, label, &mut boundary_updates));
+        if let Some(error) = rejected {
             work.new_state = new;
             work.boundary_updates = boundary_updates;
-            return Err(Error::new(ErrorKind::OutsideGrid, message));
+            return Err(error);
         }
         work.boundary_updates = boundary_updates;
         work.new_state = new;
@@ -821,7 +747,7 @@ impl<const D: usize> Workspace<D> {
     /// Clears the nodes the last step wrote (all fields zero, none active), of the one field
     /// and of each body's; the step does it itself, while it bins.
     pub fn clear_grid(&mut self) {
-        clear_grid(&mut self.nodes, &mut self.bodies);
+        clear_grid(&mut self.nodes, &mut self.bodies.nodes);
     }
 }
 

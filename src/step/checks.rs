@@ -1,0 +1,57 @@
+//! The checks of a step's new state: every particle finite, not inverted and inside the grid
+//! (decided per particle by the constitutive update, [`super::ParticleUpdate::check`]), every
+//! boundary point inside the walls. A step that fails them is rejected with a message naming
+//! the first offender and the step, and the simulation keeps its last good state.
+
+use super::{BoundaryUpdate, NewState, StepInputs};
+use crate::error::{Error, ErrorKind};
+
+/// Which step a message is about: its number (counted from 1) and the time it starts at.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct StepLabel {
+    pub number: u64,
+    pub time: f64,
+}
+
+/// The error for the first particle (lowest id) whose new state failed the checks, if any.
+/// Slot `k` of `new` holds particle `source[k]` (or `k`).
+pub(super) fn first_rejected_particle<const D: usize, S>(
+    inputs: &StepInputs<'_, D, S>,
+    label: StepLabel,
+    new: &NewState<D>,
+    admissible: &[bool],
+    source: Option<&[u32]>,
+) -> Option<Error> {
+    let (ps, dt) = (inputs.particles, inputs.dt);
+    let id_of = |k: usize| ps.id[source.map_or(k, |s| s[k] as usize)];
+    let k = admissible
+        .iter()
+        .enumerate()
+        .filter(|(_, ok)| !**ok)
+        .min_by_key(|&(k, _)| id_of(k))
+        .map(|(k, _)| k)?;
+    let (kind, what) = new.get(k).check(&inputs.grid.domain()).unwrap_err();
+    let id = id_of(k);
+    let message = format!(
+        "step {} (t = {:e}, dt = {dt:e}) rejected: particle {id} {what}; the simulation keeps its last good state",
+        label.number, label.time
+    );
+    Some(Error::new(kind, message))
+}
+
+/// Keeps the boundary points' new positions inside the walls; the error for the first one
+/// outside the grid, if any.
+pub(super) fn settle_boundary_points<const D: usize, S>(
+    inputs: &StepInputs<'_, D, S>,
+    label: StepLabel,
+    updates: &mut [BoundaryUpdate<D>],
+) -> Option<Error> {
+    let domain = inputs.grid.domain();
+    let bad = super::surface::settle_boundary_points(inputs.walls, &domain, updates);
+    let (b, what) = bad?;
+    let message = format!(
+        "step {} (t = {:e}, dt = {:e}) rejected: boundary point {b} {what}",
+        label.number, label.time, inputs.dt
+    );
+    Some(Error::new(ErrorKind::OutsideGrid, message))
+}

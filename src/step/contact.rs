@@ -1,0 +1,145 @@
+//! Contact (METHOD.md section 6): one node field per body. Each body maps to its own field and
+//! gets its own grid update (a deformable body under VC its own surface and correction; a
+//! rigid body's nodes take its velocity); then the nodes that more than one body touched get
+//! the contact correction ([`crate::contact::correct_velocities`]).
+
+use super::profile::lap;
+use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs};
+use crate::error::Result;
+use crate::grid::GridNodes;
+use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::options::Contact;
+use crate::shape::{ShapeFunction, StencilView, Stencils};
+use crate::Vector;
+
+/// The node fields of the bodies under contact, kept between steps.
+#[derive(Debug, Default)]
+pub struct BodyFields<const D: usize> {
+    /// One node field per body (material); empty without contact.
+    pub nodes: Vec<GridNodes<D>>,
+    /// Each body's VC correction (VC under contact); empty otherwise.
+    pub vc: Vec<VcCorrection<D>>,
+    /// Nodes touched by more than one body this step.
+    pub shared: Vec<usize>,
+}
+
+/// What the per-body maps read besides the step's inputs.
+pub(super) struct BodyInputs<'a, const D: usize> {
+    pub contact: Contact,
+    /// Each body's rigid velocity, `None` for a deformable body.
+    pub rigid: &'a [Option<Vector<D>>],
+    /// The forces of the one-field map (each body's VC correction replaces `vc`).
+    pub forces: Forces<'a, D>,
+    /// The stored stencils, for VC.
+    pub stored: Option<&'a Stencils<D>>,
+    pub shape: &'a dyn ShapeFunction<D>,
+    /// The particles' current volumes, for VC.
+    pub volumes: &'a [f64],
+    /// Nodes at or below this fraction of the largest particle mass get no velocity.
+    pub mass_floor_fraction: f64,
+}
+
+/// Particle to grid, grid update and the contact correction, body by body. Returns the mass
+/// floor of the grid updates and, under VC, the bodies' surfaces together (what
+/// `Sim::vc_surface` shows).
+pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    body_inputs: &BodyInputs<'_, D>,
+    bodies: &mut BodyFields<D>,
+    boundary_stencils: &mut Stencils<D>,
+    times: &mut PhaseTimes,
+) -> Result<(f64, BoundaryPoints<D>)> {
+    let StepInputs {
+        grid,
+        particles: ps,
+        stencils,
+        bins,
+        walls,
+        plan,
+        dt,
+    } = *inputs;
+    let BodyInputs {
+        contact,
+        rigid,
+        forces,
+        stored,
+        shape,
+        volumes,
+        mass_floor_fraction,
+    } = *body_inputs;
+    let (v, c) = (&ps.velocity[..], &ps.affine[..]);
+    let velocity = move |p: usize| v[p];
+    let affine = plan.apic.then_some(move |p: usize| c[p]);
+    let mut clock = std::time::Instant::now();
+    let mut mass_floor = 0.0;
+    let mut surfaces = BoundaryPoints::default();
+    for (b, nodes) in bodies.nodes.iter_mut().enumerate() {
+        // VC of a deformable body: its surface and its correction on its own field.
+        let vc = match bodies.vc.get_mut(b).filter(|_| rigid[b].is_none()) {
+            Some(vc) => {
+                let surface = super::surface::found_surface(grid, ps, Some(b as u32))?;
+                times.surface += lap(&mut clock);
+                boundary_stencils.compute(shape, grid, &surface.position);
+                vc.compute(
+                    grid,
+                    bins,
+                    &ps.position,
+                    volumes,
+                    stored.expect("VC runs with stored stencils"),
+                    &surface,
+                    boundary_stencils,
+                    nodes,
+                    Some((&ps.material, b as u32)),
+                );
+                surfaces.add(&surface.position, &surface.area_normal, None)?;
+                times.forces_and_vc += lap(&mut clock);
+                Some(&*vc)
+            }
+            None => None,
+        };
+        let largest_mass = particle_to_grid(
+            grid,
+            ps,
+            bins,
+            stencils,
+            stored,
+            velocity,
+            affine,
+            Some(Forces { vc, ..forces }),
+            Some(b as u32),
+            nodes,
+        );
+        mass_floor = mass_floor_fraction * largest_mass;
+        grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
+        if let Some(v) = rigid[b] {
+            for &n in &nodes.active {
+                nodes.velocity[n] = v;
+                nodes.velocity_old[n] = v;
+            }
+        }
+    }
+    find_shared_nodes(&bodies.nodes, &mut bodies.shared);
+    crate::contact::correct_velocities(&contact, &mut bodies.nodes, rigid, &bodies.shared);
+    Ok((mass_floor, surfaces))
+}
+
+/// The nodes that more than one of `bodies` touched, each once: those of the first body that a
+/// later one touched, then for each later body those it touched first and a still later one
+/// touched too.
+fn find_shared_nodes<const D: usize>(bodies: &[GridNodes<D>], shared: &mut Vec<usize>) {
+    shared.clear();
+    for &n in &bodies[0].active {
+        if bodies[1..].iter().any(|b| b.is_touched(n)) {
+            shared.push(n);
+        }
+    }
+    for (k, body) in bodies.iter().enumerate().skip(1) {
+        for &n in &body.active {
+            if !bodies[..k].iter().any(|b| b.is_touched(n))
+                && bodies[k + 1..].iter().any(|b| b.is_touched(n))
+            {
+                shared.push(n);
+            }
+        }
+    }
+}
