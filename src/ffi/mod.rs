@@ -1046,7 +1046,7 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
         }
         let before = with_sim!(&s.sim, m => m.steps());
         let (progress, user) = (s.progress, s.progress_data);
-        let mut observe = |p: crate::step::Progress| match progress {
+        let mut observe = |p: crate::sim::Progress| match progress {
             // SAFETY: the caller promised the callback stays callable with its user data.
             Some(f) => unsafe { f(user, p.steps, p.time, p.end, p.dt) == 0 },
             None => true,

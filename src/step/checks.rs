@@ -8,7 +8,7 @@ use crate::error::{Error, ErrorKind};
 
 /// Which step a message is about: its number (counted from 1) and the time it starts at.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct StepLabel {
+pub(crate) struct StepLabel {
     pub number: u64,
     pub time: f64,
 }

@@ -36,11 +36,10 @@ mod profile;
 #[cfg(test)]
 mod reference;
 mod surface;
-mod timestep;
+pub(crate) use checks::StepLabel;
 pub(crate) use profile::bytes as profile_bytes;
-use profile::lap;
+pub(crate) use profile::lap;
 pub use profile::{MemoryUse, PhaseTimes};
-pub use timestep::Progress;
 
 pub use crate::grid::{Bins, BlockLayout};
 pub use grid_to_particle::{
@@ -51,14 +50,13 @@ pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces};
 
 use crate::cpu::Lanes;
-use crate::error::{check_positive, Error, ErrorKind, Result};
+use crate::error::Result;
 use crate::grid::{Grid, GridNodes};
-use crate::integration::BoundaryPoints;
-use crate::material::Constitutive;
-use crate::options::{Scheme, Shape, Transfer, Walls};
+use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::material::{Constitutive, Material};
+use crate::options::{FastPaths, Options, Scheme, Shape, Transfer, Walls};
 use crate::particles::Particles;
-use crate::shape::{BSpline, BSplineOrder, StencilView, Stencils, TensorStencils};
-use crate::sim::Sim;
+use crate::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use crate::Vector;
 use constitutive_update::ConstitutiveUpdate;
 pub use contact::BodyFields;
@@ -148,170 +146,42 @@ pub(crate) struct StepInputs<'a, const D: usize, S> {
     pub dt: f64,
 }
 
-impl<const D: usize> Sim<D> {
-    /// Advances the simulation by `dt`.
-    ///
-    /// Fails, leaving the simulation exactly as it was, when `dt` is not finite and positive, when
-    /// `dt` exceeds the critical step `h / max(c + |v|)` (`UnstableTimeStep`), when the body force
-    /// fails, or when the new state has a non-finite value (`NonFinite`), an inverted particle
-    /// (`InvertedParticle`) or a particle outside the domain (`OutsideGrid`); the message names
-    /// the first such particle and the step.
-    pub fn step(&mut self, dt: f64) -> Result<()> {
-        check_positive("dt", dt)?;
-        let next = self.time + dt;
-        if !next.is_finite() || next == self.time {
-            return Err(Error::invalid(format!(
-                "dt = {dt:e} at t = {:e} gives a time that is {}",
-                self.time,
-                if next.is_finite() {
-                    "unchanged (below the resolution of the time)"
-                } else {
-                    "not finite"
-                }
-            )));
-        }
-        if self.particles.is_empty() {
-            self.time += dt;
-            self.steps += 1;
-            return Ok(());
-        }
-        self.check_options()?;
-        let critical = self.critical_dt()?;
-        if dt > critical {
-            return Err(Error::new(
-                ErrorKind::UnstableTimeStep,
-                format!(
-                    "dt = {dt:e} exceeds the critical time step h / max(c + |v|) = {critical:e} \
-                     (CFL {:.2}); use rkmpm_sim_stable_dt",
-                    dt / critical
-                ),
-            ));
-        }
-        // The body force on the calling thread (a C callback is called from the thread that
-        // steps), then the rest of the step on a thread of the pool.
-        let mut clock = std::time::Instant::now();
-        self.evaluate_body_force()?;
-        self.work.times.forces_and_vc += lap(&mut clock);
-        rayon::scope(|_| self.step_in_pool(dt))
-    }
+/// One step of a simulation: what it reads of the simulation and what it changes
+/// (`Sim::step` makes one after its checks and runs it on rayon's pool).
+pub(crate) struct Step<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    pub shape: &'a dyn ShapeFunction<D>,
+    pub options: &'a Options<D>,
+    pub materials: &'a [Material],
+    pub fast_paths: FastPaths,
+    /// Whether the body-force callback gave `work.body_acceleration` for this step.
+    pub body_force: bool,
+    /// The step's number and start time, for messages.
+    pub label: StepLabel,
+    pub particles: &'a mut Particles<D>,
+    pub boundary: &'a mut BoundaryPoints<D>,
+    /// The surface VC finds from the particles when no boundary points are given.
+    pub surface: &'a mut BoundaryPoints<D>,
+    pub vc: &'a mut Option<VcCorrection<D>>,
+    pub work: &'a mut Workspace<D>,
+}
 
-    /// [`Sim::step`] after its checks and the body force, run by a thread of rayon's pool: the
-    /// parallel passes it starts then run on the pool's threads without the calling thread
-    /// handing each one over and sleeping until it ends (two thread switches per pass, about
-    /// a dozen passes per step), which shows most on small problems.
-    fn step_in_pool(&mut self, dt: f64) -> Result<()> {
+impl<const D: usize> Step<'_, D> {
+    /// Runs the phases and, when every check passed, commits the new state; a rejected step
+    /// changes nothing of the simulation but its scratch space.
+    pub(crate) fn run(mut self, dt: f64) -> Result<()> {
         // The surface VC finds from the particles this step replaces the last one, which a
         // rejected step restores.
-        let last_surface = std::mem::take(&mut self.surface);
+        let last_surface = std::mem::take(self.surface);
         let result = self.compute_step(dt);
         if result.is_err() {
-            self.surface = last_surface;
+            *self.surface = last_surface;
         }
         let mut clock = std::time::Instant::now();
         self.work.active_nodes = self.work.nodes.active.len();
         result?;
         self.commit();
         self.work.times.commit += lap(&mut clock);
-        self.time += dt;
-        self.steps += 1;
-        Ok(())
-    }
-
-    /// Evaluates the body-force callback, if any, into `work.body_acceleration` (in storage
-    /// order; the callback sees the particles in id order). Fails, changing nothing else, when
-    /// the callback fails or returns a non-finite value.
-    fn evaluate_body_force(&mut self) -> Result<()> {
-        let Some(bf) = self.body_force.as_mut() else {
-            return Ok(());
-        };
-        let ps = &self.particles;
-        // The callback sees the particles in id order (the storage order until a sort).
-        let slots = (!ps.in_id_order()).then(|| ps.slots());
-        let acceleration = &mut self.work.body_acceleration;
-        acceleration.clear();
-        acceleration.resize(ps.len(), Vector::zeros());
-        let result = match &slots {
-            Some(slots) => {
-                let by_id =
-                    |v: &[Vector<D>]| -> Vec<Vector<D>> { slots.iter().map(|&p| v[p]).collect() };
-                let (reference, current) = (by_id(&ps.reference_position), by_id(&ps.position));
-                bf.accelerations(self.time, &reference, &current, acceleration)
-            }
-            None => bf.accelerations(
-                self.time,
-                &ps.reference_position,
-                &ps.position,
-                acceleration,
-            ),
-        };
-        result.map_err(|m| Error::new(ErrorKind::Callback, format!("body force failed: {m}")))?;
-        if let Some(p) = acceleration
-            .iter()
-            .position(|a| a.iter().any(|c| !c.is_finite()))
-        {
-            return Err(Error::new(
-                ErrorKind::Callback,
-                format!("body force returned a non-finite value for particle {p}"),
-            ));
-        }
-        // Back to storage order: slot `p` holds particle `id[p]`.
-        if slots.is_some() {
-            *acceleration = ps.id.iter().map(|&id| acceleration[id as usize]).collect();
-        }
-        Ok(())
-    }
-
-    /// Refuses combinations of options that cannot run (`Unsupported`), as every step does
-    /// before it computes anything: call it to check a set-up without stepping.
-    pub fn check_options(&self) -> Result<()> {
-        self.options.walls.check_fits(&self.grid)?;
-        if self.options.contact.is_some()
-            && (!self.boundary.is_empty() || self.options.scheme == Scheme::Musl)
-        {
-            return Err(Error::new(
-                ErrorKind::Unsupported,
-                "contact works with USL, without given boundary points (MUSL and tractions are \
-                 not supported with contact yet; VC finds each body's surface itself)",
-            ));
-        }
-        if self.options.contact.is_none()
-            && self
-                .materials
-                .iter()
-                .any(|m| m.rigid_velocity::<D>().is_some())
-        {
-            return Err(Error::new(
-                ErrorKind::Unsupported,
-                "a rigid material needs contact (rkmpm_sim_set_contact)",
-            ));
-        }
-        if matches!(self.options.transfer, Transfer::Apic) && self.shape.reproduction_order() >= 2 {
-            // D_p = Σ Ψ (x_I − x_p)(x_I − x_p)ᵀ vanishes for shape functions that reproduce
-            // quadratics, and replacing it by the velocity gradient amplifies the round trip
-            // (METHOD.md section 7).
-            return Err(Error::new(
-                ErrorKind::Unsupported,
-                "APIC with a shape function that reproduces quadratics (RK order >= 2) is unstable; \
-                 use RKMPM_TRANSFER_PIC_FLIP",
-            ));
-        }
-        if self.options.transfer == Transfer::Mls {
-            if self.shape.apic_inertia(self.grid.cell_size).is_none() {
-                return Err(Error::new(
-                    ErrorKind::Unsupported,
-                    "the MLS transfer needs the quadratic or cubic B-spline shape function (a \
-                     constant APIC inertia); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP \
-                     with other shape functions",
-                ));
-            }
-            if self.vc.is_some() {
-                return Err(Error::new(
-                    ErrorKind::Unsupported,
-                    "the MLS transfer does not go with VC integration (MLS replaces the gradients \
-                     VC corrects); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP with VC",
-                ));
-            }
-        }
         Ok(())
     }
 
@@ -370,14 +240,14 @@ impl<const D: usize> Sim<D> {
                 self.work.clear_grid();
                 crate::shape::bin_particles(
                     &mut self.work.bins,
-                    self.shape.as_ref(),
-                    &self.grid,
+                    self.shape,
+                    self.grid,
                     &self.particles.position,
                 );
                 self.work.times.bins += lap(&mut clock);
                 let mut stencils = std::mem::take(&mut self.work.stencils);
                 stencils.lanes = Lanes::chosen(self.fast_paths.vector_instructions);
-                stencils.compute(self.shape.as_ref(), &self.grid, &self.particles.position);
+                stencils.compute(self.shape, self.grid, &self.particles.position);
                 if self.shape.is_signed() {
                     self.blend_transfer_weights(&mut stencils);
                 }
@@ -421,12 +291,12 @@ impl<const D: usize> Sim<D> {
             3 => BSplineOrder::Quadratic,
             _ => BSplineOrder::Cubic,
         };
-        let mut stencils = std::mem::take(storage(&mut self.work));
+        let mut stencils = std::mem::take(storage(self.work));
         stencils.lanes = Lanes::chosen(self.fast_paths.vector_instructions);
         // MLS reads no shape-function gradient, except for the mass gradient of contact.
         let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
         // The particles' blocks are found with the factors, from their stencils' first nodes.
-        let layout = BlockLayout::new(W, &self.grid);
+        let layout = BlockLayout::new(W, self.grid);
         let (grid, position) = (&self.grid, &self.particles.position);
         let work = &mut self.work;
         let (bins, times) = (&mut work.bins, &mut work.times);
@@ -442,7 +312,7 @@ impl<const D: usize> Sim<D> {
         );
         times.bins += lap(&mut clock);
         let result = self.phases(dt, &stencils.local(), None);
-        *storage(&mut self.work) = stencils;
+        *storage(self.work) = stencils;
         result
     }
 
@@ -469,10 +339,7 @@ impl<const D: usize> Sim<D> {
         work.times.bins += lap(&mut clock);
 
         // 2. Body forces (evaluated by `step` before the pool took over).
-        let body = self
-            .body_force
-            .is_some()
-            .then_some(work.body_acceleration.as_slice());
+        let body = self.body_force.then_some(work.body_acceleration.as_slice());
 
         // Boundary points, only when VC or tractions need them: the given ones, or for VC
         // without any the surface of the particles as they are now (under contact each body's
@@ -480,17 +347,17 @@ impl<const D: usize> Sim<D> {
         let found = self.vc.is_some() && self.boundary.is_empty();
         work.times.forces_and_vc += lap(&mut clock);
         if found {
-            self.surface = BoundaryPoints::default();
+            *self.surface = BoundaryPoints::default();
         }
         if found && contact.is_none() {
-            self.surface = found_surface(grid, ps, None)?;
+            *self.surface = found_surface(grid, ps, None)?;
         }
         work.times.surface += lap(&mut clock);
         let boundary = if found { &self.surface } else { &self.boundary };
         let with_boundary = self.vc.is_some() || boundary.has_tractions();
         if with_boundary && contact.is_none() {
             work.boundary_stencils
-                .compute(self.shape.as_ref(), grid, &boundary.position);
+                .compute(self.shape, grid, &boundary.position);
         }
 
         // VC corrections of the test-function gradients (per body under contact, below).
@@ -564,7 +431,7 @@ impl<const D: usize> Sim<D> {
                 rigid: &rigid,
                 forces,
                 stored,
-                shape: self.shape.as_ref(),
+                shape: self.shape,
                 volumes: &work.volumes,
                 mass_floor_fraction,
             };
@@ -613,7 +480,7 @@ impl<const D: usize> Sim<D> {
         let finish = ConstitutiveUpdate {
             domain: grid.domain(),
             particles: ps,
-            materials: &self.materials,
+            materials: self.materials,
             walls: &self.options.walls,
             any_wall: self.options.walls.any_wall(),
             dt,
@@ -668,10 +535,7 @@ impl<const D: usize> Sim<D> {
         }
 
         // Checks: the first bad particle (lowest id), then the boundary points.
-        let label = checks::StepLabel {
-            number: self.steps + 1,
-            time: self.time,
-        };
+        let label = self.label;
         work.admissible = admissible;
         let rejected = match all_admissible {
             true => None,
@@ -689,7 +553,7 @@ impl<const D: usize> Sim<D> {
         work.new_state = new;
         work.new_signal_speed = speed;
         if found && contact.is_some() {
-            self.surface = body_surfaces;
+            *self.surface = body_surfaces;
         }
         work.times.checks += lap(&mut clock);
         Ok(())

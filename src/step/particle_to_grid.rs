@@ -21,7 +21,7 @@ pub struct Forces<'a, const D: usize> {
     pub body: Option<&'a [Vector<D>]>,
     /// Gradient corrections of VC integration (internal force only), if on.
     pub vc: Option<&'a VcCorrection<D>>,
-    /// MLS (`Some((Δt, 1/D))`, see [`crate::sim::Transfer::Mls`]): `Δt f` goes into the
+    /// MLS (`Some((Δt, 1/D))`, see [`crate::options::Transfer::Mls`]): `Δt f` goes into the
     /// momentum, the internal force through the affine term `m C − (Δt/D) V σ` and the body force
     /// through `m (v + Δt b)`; nothing is added to `force`.
     pub mls: Option<(f64, f64)>,

@@ -1,5 +1,10 @@
 //! The simulation: grid, options, materials, particles, and the safe API that the C layer wraps.
 
+mod stepping;
+mod timestep;
+
+pub use timestep::Progress;
+
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
 use crate::integration::{BoundaryPoints, VcCorrection};

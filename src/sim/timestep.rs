@@ -1,8 +1,8 @@
 //! Adaptive time stepping: advance over a span of time with steps that stay a fixed fraction
 //! (the CFL number) of the critical step, recomputed before every step.
 
+use super::Sim;
 use crate::error::{check_finite, Error, ErrorKind, Result};
-use crate::sim::Sim;
 
 /// Where an adaptive run stands, after one of its steps.
 #[derive(Debug, Clone, Copy, PartialEq)]
