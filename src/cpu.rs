@@ -3,7 +3,7 @@
 //! The library is built for the portable x86-64 baseline (SSE2: 16 registers of two `f64`, no
 //! three-operand forms). Where the processor has AVX2 and FMA (x86-64-v3, every x86 server
 //! processor since about 2015), the bodies of the particle loops run as code compiled for them
-//! ([`wide`]): fewer moves and spills. No floating-point operation changes (Rust never fuses a
+//! ([`Lanes::wide`]): fewer moves and spills. No floating-point operation changes (Rust never fuses a
 //! multiply and an add on its own and never reorders a sum), so both paths give the same bits.
 //!
 //! The choice is a value, [`Lanes`], that a simulation holds (`Sim::set_fast_paths`) and its

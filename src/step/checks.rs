@@ -3,8 +3,8 @@
 //! boundary point inside the walls. A step that fails them is rejected with a message naming
 //! the first offender and the step, and the simulation keeps its last good state.
 
-use super::{BoundaryUpdate, NewState, StepInputs};
-use crate::error::{Error, ErrorKind};
+use super::{NewState, Reorder, StepInputs, Workspace};
+use crate::error::{Error, ErrorKind, Result};
 
 /// Which step a message is about: its number (counted from 1) and the time it starts at.
 #[derive(Debug, Clone, Copy)]
@@ -13,16 +13,38 @@ pub(crate) struct StepLabel {
     pub time: f64,
 }
 
+/// Checks the new state of `work` (`all_admissible`: every particle passed its own checks) and
+/// settles the boundary points' new positions inside the walls; the error for the first
+/// offender.
+pub(super) fn check_new_state<const D: usize, S>(
+    inputs: &StepInputs<'_, D, S>,
+    all_admissible: bool,
+    work: &mut Workspace<D>,
+) -> Result<()> {
+    // Slot `k` of the new state holds particle `source[k]` when grid to particle sorted it.
+    let source = (work.reorder == Reorder::InGather).then_some(&inputs.bins.order[..]);
+    if !all_admissible {
+        if let Some(error) =
+            first_rejected_particle(inputs, &work.new_state, &work.admissible, source)
+        {
+            return Err(error);
+        }
+    }
+    match settle_boundary_points(inputs, &mut work.boundary_updates) {
+        Some(error) => Err(error),
+        None => Ok(()),
+    }
+}
+
 /// The error for the first particle (lowest id) whose new state failed the checks, if any.
 /// Slot `k` of `new` holds particle `source[k]` (or `k`).
-pub(super) fn first_rejected_particle<const D: usize, S>(
+fn first_rejected_particle<const D: usize, S>(
     inputs: &StepInputs<'_, D, S>,
-    label: StepLabel,
     new: &NewState<D>,
     admissible: &[bool],
     source: Option<&[u32]>,
 ) -> Option<Error> {
-    let (ps, dt) = (inputs.particles, inputs.dt);
+    let (ps, dt, label) = (inputs.particles, inputs.dt, inputs.label);
     let id_of = |k: usize| ps.id[source.map_or(k, |s| s[k] as usize)];
     let k = admissible
         .iter()
@@ -41,17 +63,16 @@ pub(super) fn first_rejected_particle<const D: usize, S>(
 
 /// Keeps the boundary points' new positions inside the walls; the error for the first one
 /// outside the grid, if any.
-pub(super) fn settle_boundary_points<const D: usize, S>(
+fn settle_boundary_points<const D: usize, S>(
     inputs: &StepInputs<'_, D, S>,
-    label: StepLabel,
-    updates: &mut [BoundaryUpdate<D>],
+    updates: &mut [super::BoundaryUpdate<D>],
 ) -> Option<Error> {
     let domain = inputs.grid.domain();
     let bad = super::surface::settle_boundary_points(inputs.walls, &domain, updates);
     let (b, what) = bad?;
     let message = format!(
         "step {} (t = {:e}, dt = {:e}) rejected: boundary point {b} {what}",
-        label.number, label.time, inputs.dt
+        inputs.label.number, inputs.label.time, inputs.dt
     );
     Some(Error::new(ErrorKind::OutsideGrid, message))
 }

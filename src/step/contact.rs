@@ -9,8 +9,7 @@ use crate::error::Result;
 use crate::grid::GridNodes;
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::options::Contact;
-use crate::shape::{ShapeFunction, StencilView, Stencils};
-use crate::Vector;
+use crate::shape::{StencilView, Stencils};
 
 /// The node fields of the bodies under contact, kept between steps.
 #[derive(Debug, Default)]
@@ -26,13 +25,8 @@ pub struct BodyFields<const D: usize> {
 /// What the per-body maps read besides the step's inputs.
 pub(super) struct BodyInputs<'a, const D: usize> {
     pub contact: Contact,
-    /// Each body's rigid velocity, `None` for a deformable body.
-    pub rigid: &'a [Option<Vector<D>>],
     /// The forces of the one-field map (each body's VC correction replaces `vc`).
     pub forces: Forces<'a, D>,
-    /// The stored stencils, for VC.
-    pub stored: Option<&'a Stencils<D>>,
-    pub shape: &'a dyn ShapeFunction<D>,
     /// The particles' current volumes, for VC.
     pub volumes: &'a [f64],
     /// Nodes at or below this fraction of the largest particle mass get no velocity.
@@ -53,17 +47,18 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
         grid,
         particles: ps,
         stencils,
+        stored,
         bins,
         walls,
+        shape,
+        rigid,
         plan,
         dt,
+        ..
     } = *inputs;
     let BodyInputs {
         contact,
-        rigid,
         forces,
-        stored,
-        shape,
         volumes,
         mass_floor_fraction,
     } = *body_inputs;

@@ -1,27 +1,33 @@
-//! One explicit MPM step (METHOD.md section 1), phase by phase, each in the file named after it:
+//! One explicit MPM step (METHOD.md section 1), phase by phase, each in the file named after it.
+//! `Sim::step` checks the step and calls the body-force callback on the calling thread, then
+//! runs a `Step` on rayon's pool: `Step::run` computes the shape functions and bins and
+//! calls `run_phases`, whose lines are the phases in order, then commits.
 //!
 //! 1. shape functions of every particle, once per step: B-splines as 1D factors
 //!    ([`crate::shape::TensorStencils`]), RK and every shape under VC as node lists
 //!    ([`crate::shape::Stencils`]); and the particles binned by grid block, the blocks coloured
 //!    ([`Bins`], beside the grid), for the lock-free, thread-count-independent parallel maps to
 //!    the grid (B-splines take each particle's block from its factors' first node);
-//! 2. body forces (the callback, once per step with whole arrays), VC corrections
-//!    (`crate::integration`), over the boundary points or the surface found from the particles
-//!    (`surface`);
+//!    signed shapes blend their transfer weights at a body's edge (`edge_lumping`);
+//! 2. body forces (the callback, once per step with whole arrays); the boundary points and the
+//!    VC corrections (`vc_corrections`), over the given boundary points or the surface found
+//!    from the particles (`surface`);
 //! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force; tractions
 //!    (`surface`);
 //! 4. [`grid_update`]: velocities, wall conditions; under contact one field per body, then the
-//!    contact correction ([`crate::contact`]);
+//!    contact correction (`contact`);
 //! 5. [`grid_to_particle`]: velocity (PIC/FLIP or APIC), position, velocity gradient, `F`;
-//!    under USL each particle's constitutive update and checks (`constitutive_update`) follow in
-//!    the same pass, while it is in cache; under MUSL the new particle momenta are mapped to the
-//!    grid again first (`musl`) and the constitutive update and checks run after; boundary
-//!    points move with the grid (`surface`);
-//! 6. the grid is reset where it was written.
+//!    under USL each particle's constitutive update (`constitutive_update`) follows in the same
+//!    pass, while it is in cache; under MUSL the new particle momenta are mapped to the grid
+//!    again first (`musl`) and the constitutive update runs after; boundary points move with
+//!    the grid (`surface`);
+//! 6. the checks (`checks`), the commit, and the grid reset where it was written (while the
+//!    next step bins).
 //!
 //! The new particle state is built in arrays of the workspace ([`NewState`]) and swapped with the
 //! particles' only when every particle passed the checks (finite, `det F > 0`, inside the grid),
-//! so a failed step leaves the last good state.
+//! so a failed step leaves the last good state. `reference` (tests only) is the same step
+//! written plainly, node by node, and the oracle of the fast one.
 //! [`PhaseTimes`] accumulates the time per phase.
 
 mod checks;
@@ -36,6 +42,7 @@ mod profile;
 #[cfg(test)]
 mod reference;
 mod surface;
+mod vc_corrections;
 pub(crate) use checks::StepLabel;
 pub(crate) use profile::bytes as profile_bytes;
 pub(crate) use profile::lap;
@@ -62,7 +69,7 @@ use constitutive_update::ConstitutiveUpdate;
 pub use contact::BodyFields;
 use rayon::prelude::*;
 pub use surface::BoundaryUpdate;
-use surface::{apply_tractions, found_surface, move_boundary_points};
+use surface::{apply_tractions, move_boundary_points};
 
 /// Scratch space of a step, kept between steps so the hot loops do not allocate.
 #[derive(Debug, Default)]
@@ -139,9 +146,22 @@ pub(crate) struct StepInputs<'a, const D: usize, S> {
     pub particles: &'a Particles<D>,
     /// The particles' shape functions this step.
     pub stencils: &'a S,
+    /// The same as stored lists, when they are (for VC and the lumping of signed shapes).
+    pub stored: Option<&'a Stencils<D>>,
     /// The particles binned by grid block for the maps to the grid.
     pub bins: &'a Bins<D>,
     pub walls: &'a Walls<D>,
+    pub options: &'a Options<D>,
+    pub shape: &'a dyn ShapeFunction<D>,
+    pub materials: &'a [Material],
+    /// Each material's rigid velocity, `None` for a deformable one.
+    pub rigid: &'a [Option<Vector<D>>],
+    /// The body-force callback's accelerations this step, if there is one.
+    pub body_acceleration: Option<&'a [Vector<D>]>,
+    /// The given boundary points.
+    pub boundary: &'a BoundaryPoints<D>,
+    pub fast_paths: FastPaths,
+    pub label: StepLabel,
     pub plan: TransferPlan,
     pub dt: f64,
 }
@@ -316,9 +336,8 @@ impl<const D: usize> Step<'_, D> {
         result
     }
 
-    /// Body forces, VC, the transfers, the constitutive update and the checks, with the
-    /// particles' stencils (`stored`: the same as stored lists, when they are, for VC and the
-    /// lumping of signed shape functions).
+    /// The phases after the shape functions, with the particles' stencils (`stored`: the same
+    /// as stored lists, when they are).
     fn phases<S: StencilView<D>>(
         &mut self,
         dt: f64,
@@ -326,237 +345,34 @@ impl<const D: usize> Step<'_, D> {
         stored: Option<&Stencils<D>>,
     ) -> Result<()> {
         let plan = self.transfer_plan();
-        let grid = &self.grid;
-        let ps = &self.particles;
-        let work = &mut self.work;
-        let contact = self.options.contact;
         let rigid: Vec<Option<Vector<D>>> =
             self.materials.iter().map(|m| m.rigid_velocity()).collect();
-        let mut clock = std::time::Instant::now();
-        // Whether to store the particles in block order this step (with the bins' time).
-        let lanes = Lanes::chosen(self.fast_paths.vector_instructions);
-        let scattered = self.fast_paths.particle_sorting && work.bins.is_scattered(lanes);
-        work.times.bins += lap(&mut clock);
-
-        // 2. Body forces (evaluated by `step` before the pool took over).
-        let body = self.body_force.then_some(work.body_acceleration.as_slice());
-
-        // Boundary points, only when VC or tractions need them: the given ones, or for VC
-        // without any the surface of the particles as they are now (under contact each body's
-        // own, found with its VC correction below).
-        let found = self.vc.is_some() && self.boundary.is_empty();
-        work.times.forces_and_vc += lap(&mut clock);
-        if found {
-            *self.surface = BoundaryPoints::default();
-        }
-        if found && contact.is_none() {
-            *self.surface = found_surface(grid, ps, None)?;
-        }
-        work.times.surface += lap(&mut clock);
-        let boundary = if found { &self.surface } else { &self.boundary };
-        let with_boundary = self.vc.is_some() || boundary.has_tractions();
-        if with_boundary && contact.is_none() {
-            work.boundary_stencils
-                .compute(self.shape, grid, &boundary.position);
-        }
-
-        // VC corrections of the test-function gradients (per body under contact, below).
-        if self.vc.is_none() || contact.is_none() {
-            // No per-body corrections left from a step that had them.
-            work.bodies.vc.clear();
-        }
-        if let Some(vc) = self.vc.as_ref() {
-            work.volumes.clear();
-            work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
-            if contact.is_some()
-                && (work.bodies.vc.len() != self.materials.len()
-                    || work.bodies.vc.iter().any(|c| c.order != vc.order))
-            {
-                work.bodies.vc = vec![vc.clone(); self.materials.len()];
-            }
-        }
-        if let Some(vc) = self.vc.as_mut().filter(|_| contact.is_none()) {
-            vc.compute(
-                grid,
-                &work.bins,
-                &ps.position,
-                &work.volumes,
-                stored.expect("VC runs with stored stencils"),
-                boundary,
-                &work.boundary_stencils,
-                &mut work.nodes,
-                None,
-            );
-        }
-
-        work.times.forces_and_vc += lap(&mut clock);
-
-        // 3. Particle to grid (one field, or one per body under contact).
-        let (v, c) = (&ps.velocity[..], &ps.affine[..]);
-        let velocity = move |p: usize| v[p];
-        let affine_map = plan.apic.then_some(move |p: usize| c[p]);
-        let forces = Forces {
-            gravity: self.options.gravity,
-            body,
-            vc: self.vc.as_ref(),
-            mls: plan
-                .inverse_inertia
-                .filter(|_| plan.mls)
-                .map(|inverse_inertia| (dt, inverse_inertia)),
-        };
-        // Nodes at or below this mass get no velocity. Signed shape functions and linear hats:
-        // a fraction of the largest particle mass (which particle to grid returns), since their
-        // node masses may be tiny where the force or the velocity gradient is not. The smooth
-        // nonnegative ones (B-splines, RK1): only empty nodes, so that no node's momentum or
-        // force is dropped and a free body's momentum is kept to round-off (with the floor a
-        // cubic B-spline block drifted by 1e-10 of M·v in 1000 steps).
-        let floored =
-            self.shape.is_signed() || matches!(self.options.shape, crate::shape::Shape::Linear);
-        let mass_floor_fraction = if floored { 1e-10 } else { 0.0 };
+        let work = &mut *self.work;
+        // Every phase reads the bins and the body accelerations: out of the workspace meanwhile.
+        let bins = std::mem::take(&mut work.bins);
+        let body_acceleration = std::mem::take(&mut work.body_acceleration);
         let inputs = StepInputs {
-            grid,
-            particles: ps,
+            grid: self.grid,
+            particles: &*self.particles,
             stencils,
-            bins: &work.bins,
+            stored,
+            bins: &bins,
             walls: &self.options.walls,
-            plan,
-            dt,
-        };
-        // Under contact with VC: the bodies' surfaces together (what `Sim::vc_surface` shows).
-        let mut body_surfaces = BoundaryPoints::default();
-        let mass_floor;
-        if let Some(contact) = contact {
-            let body_inputs = contact::BodyInputs {
-                contact,
-                rigid: &rigid,
-                forces,
-                stored,
-                shape: self.shape,
-                volumes: &work.volumes,
-                mass_floor_fraction,
-            };
-            (mass_floor, body_surfaces) = contact::particle_to_grid_per_body(
-                &inputs,
-                &body_inputs,
-                &mut work.bodies,
-                &mut work.boundary_stencils,
-                &mut work.times,
-            )?;
-        } else {
-            mass_floor = mass_floor_fraction
-                * particle_to_grid(
-                    grid,
-                    ps,
-                    &work.bins,
-                    stencils,
-                    stored,
-                    velocity,
-                    affine_map,
-                    Some(forces),
-                    None,
-                    &mut work.nodes,
-                );
-            if boundary.has_tractions() {
-                apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
-            }
-            work.times.particle_to_grid += lap(&mut clock);
-            // 4. Grid update with the wall conditions.
-            let no_force = forces.mls.is_some() && !boundary.has_tractions();
-            grid_update(
-                grid,
-                &self.options.walls,
-                &mut work.nodes,
-                Some(dt),
-                mass_floor,
-                no_force,
-            );
-        }
-
-        work.times.grid_update += lap(&mut clock);
-
-        // 6. (defined here, run inside the gather under USL) Constitutive update: elastic models
-        //    from F, history models by return mapping from their state and the increment
-        //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
-        let finish = ConstitutiveUpdate {
-            domain: grid.domain(),
-            particles: ps,
+            options: self.options,
+            shape: self.shape,
             materials: self.materials,
-            walls: &self.options.walls,
-            any_wall: self.options.walls.any_wall(),
-            dt,
-        };
-        let mut admissible = std::mem::take(&mut work.admissible);
-
-        // 5. Grid to particle, in block order when the particles have scattered (USL).
-        let mut new = std::mem::take(&mut work.new_state);
-        let usl = self.options.scheme == Scheme::Usl;
-        work.reorder = match scattered {
-            false => Reorder::No,
-            true if usl && !work.reorder_at_commit => Reorder::InGather,
-            true => Reorder::AtCommit,
-        };
-        let source = (work.reorder == Reorder::InGather).then_some(&work.bins.order[..]);
-        let fields = if contact.is_some() {
-            Fields::PerBody(&work.bodies.nodes, &ps.material)
-        } else {
-            Fields::One(&work.nodes)
-        };
-        let (mut speed, mut all_admissible) = grid_to_particle(
-            grid,
-            ps,
-            stencils,
-            fields,
-            &rigid,
+            rigid: &rigid,
+            body_acceleration: self.body_force.then_some(&body_acceleration[..]),
+            boundary: &*self.boundary,
+            fast_paths: self.fast_paths,
+            label: self.label,
             plan,
             dt,
-            usl.then_some(&finish),
-            source,
-            &mut new,
-            &mut admissible,
-        );
-        if !usl {
-            // MUSL: the new particle momenta mapped to the grid again, and `F` from those
-            // grid velocities.
-            musl::second_map(&inputs, mass_floor, &mut work.nodes, &mut new);
-        }
-
-        // Boundary points move with the grid like massless particles.
-        let mut boundary_updates = std::mem::take(&mut work.boundary_updates);
-        boundary_updates.clear();
-        if with_boundary && !found {
-            let bs = &work.boundary_stencils;
-            move_boundary_points(boundary, bs, &work.nodes, dt, &mut boundary_updates);
-        }
-
-        work.times.grid_to_particle += lap(&mut clock);
-        if !usl {
-            (speed, all_admissible) = finish.run_all(&mut new, &mut admissible);
-            work.times.constitutive += lap(&mut clock);
-        }
-
-        // Checks: the first bad particle (lowest id), then the boundary points.
-        let label = self.label;
-        work.admissible = admissible;
-        let rejected = match all_admissible {
-            true => None,
-            false => {
-                checks::first_rejected_particle(&inputs, label, &new, &work.admissible, source)
-            }
-        }
-        .or_else(|| checks::settle_boundary_points(&inputs, label, &mut boundary_updates));
-        if let Some(error) = rejected {
-            work.new_state = new;
-            work.boundary_updates = boundary_updates;
-            return Err(error);
-        }
-        work.boundary_updates = boundary_updates;
-        work.new_state = new;
-        work.new_signal_speed = speed;
-        if found && contact.is_some() {
-            *self.surface = body_surfaces;
-        }
-        work.times.checks += lap(&mut clock);
-        Ok(())
+        };
+        let result = run_phases(&inputs, &mut *self.vc, &mut *self.surface, work);
+        work.bins = bins;
+        work.body_acceleration = body_acceleration;
+        result
     }
 
     /// Swaps the checked new state into the particles (the old one becomes the next step's
@@ -596,6 +412,194 @@ impl<const D: usize> Step<'_, D> {
             b.area_normal[k] = u.area_normal;
         }
     }
+}
+
+/// The phases of METHOD.md section 1 after the shape functions, in order. The new particle
+/// state is left in `work.new_state` when every check passed.
+fn run_phases<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    vc: &mut Option<VcCorrection<D>>,
+    surface: &mut BoundaryPoints<D>,
+    work: &mut Workspace<D>,
+) -> Result<()> {
+    let mut clock = std::time::Instant::now();
+    // Whether to store the particles in block order this step (with the bins' time).
+    let lanes = Lanes::chosen(inputs.fast_paths.vector_instructions);
+    let scattered = inputs.fast_paths.particle_sorting && inputs.bins.is_scattered(lanes);
+    work.times.bins += lap(&mut clock);
+    // 2. Body forces (the callback ran before the pool took over), the boundary points and
+    //    the VC corrections.
+    let found = vc_corrections::boundary_and_corrections(inputs, vc, surface, work)?;
+    let boundary = if found { &*surface } else { inputs.boundary };
+    // 3–4. Particle to grid and the grid update: one field, or one per body and contact.
+    let vc = vc.as_ref();
+    let (mass_floor, body_surfaces) = particle_to_grid_and_update(inputs, vc, boundary, work)?;
+    // 5–6. Grid to particle and the constitutive update; boundary points move with the grid.
+    let moving = (vc.is_some() || boundary.has_tractions()) && !found;
+    let moving = moving.then_some(boundary);
+    let all_admissible = grid_to_particle_and_update(inputs, moving, scattered, mass_floor, work);
+    // The checks: every particle, every boundary point.
+    clock = std::time::Instant::now();
+    checks::check_new_state(inputs, all_admissible, work)?;
+    if found && inputs.options.contact.is_some() {
+        *surface = body_surfaces;
+    }
+    work.times.checks += lap(&mut clock);
+    Ok(())
+}
+
+/// Particle to grid and the grid update with the wall conditions (and the tractions of
+/// `boundary`): one field, or under contact one per body and the contact correction. Returns
+/// the mass floor of the grid update and, under contact with VC, the bodies' surfaces.
+fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    vc: Option<&VcCorrection<D>>,
+    boundary: &BoundaryPoints<D>,
+    work: &mut Workspace<D>,
+) -> Result<(f64, BoundaryPoints<D>)> {
+    let (grid, ps, plan, dt) = (inputs.grid, inputs.particles, inputs.plan, inputs.dt);
+    let mut clock = std::time::Instant::now();
+    let (v, c) = (&ps.velocity[..], &ps.affine[..]);
+    let velocity = move |p: usize| v[p];
+    let affine_map = plan.apic.then_some(move |p: usize| c[p]);
+    let forces = Forces {
+        gravity: inputs.options.gravity,
+        body: inputs.body_acceleration,
+        vc,
+        mls: plan
+            .inverse_inertia
+            .filter(|_| plan.mls)
+            .map(|inverse_inertia| (dt, inverse_inertia)),
+    };
+    // Nodes at or below this mass get no velocity. Signed shape functions and linear hats:
+    // a fraction of the largest particle mass (which particle to grid returns), since their
+    // node masses may be tiny where the force or the velocity gradient is not. The smooth
+    // nonnegative ones (B-splines, RK1): only empty nodes, so that no node's momentum or
+    // force is dropped and a free body's momentum is kept to round-off (with the floor a
+    // cubic B-spline block drifted by 1e-10 of M·v in 1000 steps).
+    let floored = inputs.shape.is_signed() || matches!(inputs.options.shape, Shape::Linear);
+    let mass_floor_fraction = if floored { 1e-10 } else { 0.0 };
+    if let Some(contact) = inputs.options.contact {
+        let body_inputs = contact::BodyInputs {
+            contact,
+            forces,
+            volumes: &work.volumes,
+            mass_floor_fraction,
+        };
+        let result = contact::particle_to_grid_per_body(
+            inputs,
+            &body_inputs,
+            &mut work.bodies,
+            &mut work.boundary_stencils,
+            &mut work.times,
+        );
+        work.times.grid_update += lap(&mut clock);
+        return result;
+    }
+    let mass_floor = mass_floor_fraction
+        * particle_to_grid(
+            grid,
+            ps,
+            inputs.bins,
+            inputs.stencils,
+            inputs.stored,
+            velocity,
+            affine_map,
+            Some(forces),
+            None,
+            &mut work.nodes,
+        );
+    if boundary.has_tractions() {
+        apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
+    }
+    work.times.particle_to_grid += lap(&mut clock);
+    let no_force = forces.mls.is_some() && !boundary.has_tractions();
+    grid_update(
+        grid,
+        inputs.walls,
+        &mut work.nodes,
+        Some(dt),
+        mass_floor,
+        no_force,
+    );
+    work.times.grid_update += lap(&mut clock);
+    Ok((mass_floor, BoundaryPoints::default()))
+}
+
+/// Grid to particle into `work.new_state`, in block order when the particles have `scattered`
+/// (USL), with the constitutive update: inside the same pass under USL, after MUSL's second
+/// map otherwise. The `moving` boundary points move with the grid. Returns whether every
+/// particle passed its checks, and leaves the signal speed in `work.new_signal_speed`.
+fn grid_to_particle_and_update<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    moving: Option<&BoundaryPoints<D>>,
+    scattered: bool,
+    mass_floor: f64,
+    work: &mut Workspace<D>,
+) -> bool {
+    let (grid, ps, dt) = (inputs.grid, inputs.particles, inputs.dt);
+    let mut clock = std::time::Instant::now();
+    // 6. (defined here, run inside the gather under USL) Constitutive update: elastic models
+    //    from F, history models by return mapping from their state and the increment
+    //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
+    let finish = ConstitutiveUpdate {
+        domain: grid.domain(),
+        particles: ps,
+        materials: inputs.materials,
+        walls: inputs.walls,
+        any_wall: inputs.walls.any_wall(),
+        dt,
+    };
+    let mut admissible = std::mem::take(&mut work.admissible);
+
+    // 5. Grid to particle, in block order when the particles have scattered (USL).
+    let mut new = std::mem::take(&mut work.new_state);
+    let usl = inputs.options.scheme == Scheme::Usl;
+    work.reorder = match scattered {
+        false => Reorder::No,
+        true if usl && !work.reorder_at_commit => Reorder::InGather,
+        true => Reorder::AtCommit,
+    };
+    let source = (work.reorder == Reorder::InGather).then_some(&inputs.bins.order[..]);
+    let fields = match inputs.options.contact {
+        Some(_) => Fields::PerBody(&work.bodies.nodes, &ps.material),
+        None => Fields::One(&work.nodes),
+    };
+    let (mut speed, mut all_admissible) = grid_to_particle(
+        grid,
+        ps,
+        inputs.stencils,
+        fields,
+        inputs.rigid,
+        inputs.plan,
+        dt,
+        usl.then_some(&finish),
+        source,
+        &mut new,
+        &mut admissible,
+    );
+    if !usl {
+        // MUSL: the new particle momenta mapped to the grid again, and `F` from those
+        // grid velocities.
+        musl::second_map(inputs, mass_floor, &mut work.nodes, &mut new);
+    }
+
+    // Boundary points move with the grid like massless particles.
+    work.boundary_updates.clear();
+    if let Some(boundary) = moving {
+        let bs = &work.boundary_stencils;
+        move_boundary_points(boundary, bs, &work.nodes, dt, &mut work.boundary_updates);
+    }
+
+    work.times.grid_to_particle += lap(&mut clock);
+    if !usl {
+        (speed, all_admissible) = finish.run_all(&mut new, &mut admissible);
+        work.times.constitutive += lap(&mut clock);
+    }
+    work.admissible = admissible;
+    work.new_state = new;
+    work.new_signal_speed = speed;
+    all_admissible
 }
 
 /// Clears the nodes the last step wrote (all fields zero, none active), of the one field and of

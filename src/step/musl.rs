@@ -26,6 +26,7 @@ pub(super) fn second_map<const D: usize, S: StencilView<D>>(
         walls,
         plan,
         dt,
+        ..
     } = *inputs;
     for &n in &nodes.active {
         nodes.momentum[n] = Vector::zeros();

@@ -1,0 +1,71 @@
+//! The boundary points and the VC corrections of a step (METHOD.md section 3): the given
+//! boundary points, or for VC without any the surface found from the particles as they are now
+//! (under contact each body's own, found with its correction in `contact`); their stencils; and
+//! the corrections of the test-function gradients ([`VcCorrection::compute`]).
+
+use super::profile::lap;
+use super::surface::found_surface;
+use super::{StepInputs, Workspace};
+use crate::error::Result;
+use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::shape::StencilView;
+
+/// Sets up the boundary points the step needs (VC or tractions) and computes the VC
+/// corrections of the one field (under contact, prepares one correction per body). Returns
+/// whether the boundary points are the surface found from the particles (then in `surface`).
+pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    vc: &mut Option<VcCorrection<D>>,
+    surface: &mut BoundaryPoints<D>,
+    work: &mut Workspace<D>,
+) -> Result<bool> {
+    let (grid, ps, contact) = (inputs.grid, inputs.particles, inputs.options.contact);
+    let mut clock = std::time::Instant::now();
+    let found = vc.is_some() && inputs.boundary.is_empty();
+    work.times.forces_and_vc += lap(&mut clock);
+    if found {
+        *surface = BoundaryPoints::default();
+    }
+    if found && contact.is_none() {
+        *surface = found_surface(grid, ps, None)?;
+    }
+    work.times.surface += lap(&mut clock);
+    let boundary = if found { &*surface } else { inputs.boundary };
+    let with_boundary = vc.is_some() || boundary.has_tractions();
+    if with_boundary && contact.is_none() {
+        work.boundary_stencils
+            .compute(inputs.shape, grid, &boundary.position);
+    }
+
+    // VC corrections of the test-function gradients (per body under contact, in `contact`).
+    if vc.is_none() || contact.is_none() {
+        // No per-body corrections left from a step that had them.
+        work.bodies.vc.clear();
+    }
+    if let Some(vc) = vc.as_ref() {
+        work.volumes.clear();
+        work.volumes.extend((0..ps.len()).map(|p| ps.volume(p)));
+        let bodies = inputs.materials.len();
+        if contact.is_some()
+            && (work.bodies.vc.len() != bodies
+                || work.bodies.vc.iter().any(|c| c.order != vc.order))
+        {
+            work.bodies.vc = vec![vc.clone(); bodies];
+        }
+    }
+    if let Some(vc) = vc.as_mut().filter(|_| contact.is_none()) {
+        vc.compute(
+            grid,
+            inputs.bins,
+            &ps.position,
+            &work.volumes,
+            inputs.stored.expect("VC runs with stored stencils"),
+            boundary,
+            &work.boundary_stencils,
+            &mut work.nodes,
+            None,
+        );
+    }
+    work.times.forces_and_vc += lap(&mut clock);
+    Ok(found)
+}
