@@ -5,7 +5,7 @@
 //! not. What the API hands out is in id order: [`Particles::write_field`], the C API's arrays,
 //! the VTK files, the body-force callback's arrays and the particles named in error messages.
 
-use crate::material::PlasticState;
+use crate::material::History;
 use crate::{Matrix, Vector};
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 use rayon::prelude::*;
@@ -34,7 +34,7 @@ pub struct Particles<const D: usize> {
     pub affine: Vec<Matrix<D>>,
     /// History of elastoplastic materials (`F_e`, plastic strain); empty until particles of a
     /// history material are added, so elastic scenes carry none of it.
-    pub plastic: Vec<PlasticState>,
+    pub history: Vec<History>,
     /// The id of the particle in each slot: the index it was added with (`0, 1, …` over all
     /// calls to `Sim::add_particles`).
     pub id: Vec<u32>,
@@ -47,7 +47,7 @@ pub struct SpareArrays<const D: usize> {
     matrices: Vec<Matrix<D>>,
     scalars: Vec<f64>,
     indices: Vec<u32>,
-    plastic: Vec<PlasticState>,
+    history: Vec<History>,
 }
 
 impl<const D: usize> SpareArrays<D> {
@@ -58,7 +58,7 @@ impl<const D: usize> SpareArrays<D> {
             + self.matrices.capacity() * size_of::<Matrix<D>>()
             + self.scalars.capacity() * 8
             + self.indices.capacity() * 4
-            + self.plastic.capacity() * size_of::<PlasticState>()
+            + self.history.capacity() * size_of::<History>()
     }
 }
 
@@ -159,7 +159,7 @@ impl<const D: usize> Particles<D> {
             + (self.reference_volume.capacity() + self.mass.capacity() + self.pressure.capacity())
                 * 8
             + (self.material.capacity() + self.id.capacity()) * 4
-            + self.plastic.capacity() * size_of::<PlasticState>()
+            + self.history.capacity() * size_of::<History>()
     }
 
     /// Current volume of particle `p`.
@@ -187,8 +187,8 @@ impl<const D: usize> Particles<D> {
             Field::Pressure => o[0] = self.pressure[p],
             Field::Mass => o[0] = self.mass[p],
             Field::Volume => o[0] = self.volume(p),
-            Field::PlasticStrain => o[0] = self.plastic.get(p).map_or(0.0, |s| s.plastic_strain),
-            Field::Damage => o[0] = self.plastic.get(p).map_or(0.0, |s| s.damage),
+            Field::PlasticStrain => o[0] = self.history.get(p).map_or(0.0, |s| s.plastic_strain),
+            Field::Damage => o[0] = self.history.get(p).map_or(0.0, |s| s.damage),
         };
         for (p, &id) in self.id.iter().enumerate() {
             let i = id as usize * k;
@@ -237,7 +237,7 @@ impl<const D: usize> Particles<D> {
         permute_array(&mut self.mass, &mut s.scalars, order);
         permute_array(&mut self.material, &mut s.indices, order);
         permute_array(&mut self.id, &mut s.indices, order);
-        permute_array(&mut self.plastic, &mut s.plastic, order);
+        permute_array(&mut self.history, &mut s.history, order);
     }
 
     /// Total linear momentum `Σ m_p v_p`.

@@ -91,7 +91,7 @@ fn plane_strain_penetration_perforates_fast_and_stops_slow() {
         }
         assert!(r.max_damage <= 1.0 && r.failed_particles > 0);
         let ps = sim.particles();
-        assert!(ps.plastic.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
+        assert!(ps.history.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
         assert_eq!(ps.mass.iter().sum::<f64>(), mass0);
     }
 }
@@ -119,5 +119,5 @@ fn regularized_damage_shears_out_a_plug_on_coarse_cells() {
     assert!((0.8..2.5).contains(&r.separated_mass), "{r:?}");
     assert!(r.residual_speed > 0.0 && r.residual_speed < 300.0, "{r:?}");
     let ps = sim.particles();
-    assert!(ps.plastic.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
+    assert!(ps.history.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
 }

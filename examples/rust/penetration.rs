@@ -436,7 +436,7 @@ fn motion<const D: usize>(sim: &Sim<D>, radius: f64) -> (f64, f64, f64, usize) {
         let sum = if ps.material[p] == 1 {
             &mut projectile
         } else {
-            failed += usize::from(ps.plastic[p].damage >= 1.0);
+            failed += usize::from(ps.history[p].damage >= 1.0);
             if ps.reference_position[p].rows(0, D - 1).norm() >= radius {
                 continue;
             }

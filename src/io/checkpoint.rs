@@ -18,8 +18,8 @@
 use crate::error::{Error, ErrorKind, Result};
 use crate::integration::BoundaryPoints;
 use crate::material::{
-    Constitutive, DruckerPrager, ElasticConstants, InertialRheology, JohnsonCook,
-    JohnsonCookParameters, LinearElastic, Material, MieGruneisen, NeoHookean, PlasticState, Rigid,
+    Constitutive, DruckerPrager, ElasticConstants, History, InertialRheology, JohnsonCook,
+    JohnsonCookParameters, LinearElastic, Material, MieGruneisen, NeoHookean, Rigid,
 };
 use crate::options::{
     Boundary, Contact, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Transfer,
@@ -366,8 +366,8 @@ fn write_particles<const D: usize>(w: &mut Writer, ps: &Particles<D>, version: u
     w.len(ps.material.len());
     ps.material.iter().for_each(|&m| w.u32(m));
     w.matrices(&ps.affine);
-    w.len(ps.plastic.len());
-    for s in &ps.plastic {
+    w.len(ps.history.len());
+    for s in &ps.history {
         w.f64s(s.elastic_deformation.iter());
         w.f64s(&[s.plastic_strain, s.damage, s.heating]);
     }
@@ -393,13 +393,13 @@ fn read_particles<const D: usize>(r: &mut Reader, version: u32) -> Result<Partic
     ps.material = (0..n).map(|_| r.u32()).collect::<Result<_>>()?;
     ps.affine = r.matrices()?;
     let n = r.len(8 * 12)?;
-    ps.plastic = (0..n)
+    ps.history = (0..n)
         .map(|_| {
             let mut fe = Matrix3::zeros();
             for c in fe.iter_mut() {
                 *c = r.f64()?;
             }
-            Ok(PlasticState {
+            Ok(History {
                 elastic_deformation: fe,
                 plastic_strain: r.f64()?,
                 damage: r.f64()?,
@@ -437,7 +437,7 @@ fn read_particles<const D: usize>(r: &mut Reader, version: u32) -> Result<Partic
     .iter()
     .all(|&k| k == len);
     let optional = |k: usize| k == 0 || k == len;
-    if !same || !optional(ps.affine.len()) || !optional(ps.plastic.len()) {
+    if !same || !optional(ps.affine.len()) || !optional(ps.history.len()) {
         return Err(corrupt("the particle arrays differ in length"));
     }
     Ok(ps)
@@ -549,10 +549,10 @@ impl<const D: usize> Sim<D> {
             .material
             .iter()
             .any(|&m| !sim.materials[m as usize].is_elastic());
-        if history && ps.plastic.len() != n {
+        if history && ps.history.len() != n {
             return Err(corrupt(format!(
                 "{} history records for {n} particles of a plastic material",
-                ps.plastic.len()
+                ps.history.len()
             )));
         }
         sim.particles = ps;

@@ -19,7 +19,7 @@
 //!   about a cell, so on coarse cells the strains to failure can be scaled down
 //!   ([`JohnsonCookParameters::regularized`], a crack band).
 
-use super::plastic::PlasticState;
+use super::plastic::History;
 use super::ElasticConstants;
 use crate::error::{check_finite, check_positive, Error, Result};
 use nalgebra::{Matrix3, Vector3};
@@ -249,11 +249,11 @@ impl JohnsonCook {
     /// for a total `det F = j`.
     pub fn update(
         &self,
-        state: &PlasticState,
+        state: &History,
         df: &Matrix3<f64>,
         j: f64,
         dt: f64,
-    ) -> (PlasticState, Matrix3<f64>) {
+    ) -> (History, Matrix3<f64>) {
         let g = self.elastic.mu;
         let fe = df * state.elastic_deformation;
         let svd = fe.svd(true, true);
@@ -322,7 +322,7 @@ impl JohnsonCook {
     /// Stored energy per unit reference volume of a point in state `state`: the elastic energy
     /// of `F_e`, or for a failed (or melted) point, which carries no deviator and no tension,
     /// only the bulk energy of compression.
-    pub fn stored_energy(&self, state: &PlasticState) -> f64 {
+    pub fn stored_energy(&self, state: &History) -> f64 {
         let fe = &state.elastic_deformation;
         if state.damage >= 1.0 || self.homologous(state.heating) >= 1.0 {
             let vol = fe.determinant().ln();
@@ -370,7 +370,7 @@ mod tests {
     fn uniaxial_stress_follows_the_hardening_curve() {
         let mut cu = copper(false, false);
         cu.p.taylor_quinney = 0.0;
-        let mut state = PlasticState::default();
+        let mut state = History::default();
         let mut sigma = Matrix3::zeros();
         let steps = 200;
         let total = 0.2;
@@ -410,7 +410,7 @@ mod tests {
     #[test]
     fn adiabatic_heating_matches_plastic_work() {
         let cu = copper(false, false);
-        let mut state = PlasticState::default();
+        let mut state = History::default();
         let mut work = 0.0;
         for _ in 0..100 {
             let before = state;
@@ -434,7 +434,7 @@ mod tests {
     fn damage_accumulates_and_failure_releases_stress() {
         let mut cu = copper(true, false);
         cu.p.taylor_quinney = 0.0;
-        let mut state = PlasticState::default();
+        let mut state = History::default();
         let mut n = 0;
         while state.damage < 1.0 && n < 10_000 {
             state = cu.update(&state, &stretch(0.01), 1.0, 1e-6).0;
@@ -466,7 +466,7 @@ mod tests {
             })
             .unwrap();
             m.p.eos = None;
-            let mut state = PlasticState::default();
+            let mut state = History::default();
             while state.damage < 1.0 {
                 state = m.update(&state, &stretch(0.005), 1.0, 1e-6).0;
             }

@@ -11,7 +11,7 @@ mod plastic;
 
 pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
 pub use johnson_cook::{ofhc_copper, JohnsonCook, JohnsonCookParameters, MieGruneisen};
-pub use plastic::{DruckerPrager, InertialRheology, PlasticState};
+pub use plastic::{DruckerPrager, History, InertialRheology};
 
 use crate::error::Result;
 use nalgebra::Matrix3;
@@ -131,11 +131,11 @@ impl Material {
     /// history and never get here (the step calls [`Constitutive::cauchy_stress`]).
     pub fn plastic_update(
         &self,
-        state: &PlasticState,
+        state: &History,
         df: &Matrix3<f64>,
         j: f64,
         dt: f64,
-    ) -> (PlasticState, Matrix3<f64>) {
+    ) -> (History, Matrix3<f64>) {
         match self {
             Material::DruckerPrager(m) => m.update(state, df, j, dt),
             Material::JohnsonCook(m) => m.update(state, df, j, dt),
@@ -147,7 +147,7 @@ impl Material {
 
     /// Stored elastic energy per unit reference volume of a point with deformation `f` and, for
     /// history models, state `state`.
-    pub fn stored_energy(&self, f: &Matrix3<f64>, state: Option<&PlasticState>) -> f64 {
+    pub fn stored_energy(&self, f: &Matrix3<f64>, state: Option<&History>) -> f64 {
         match (self, state) {
             (Material::DruckerPrager(m), Some(s)) => {
                 m.elastic_energy(&s.elastic_deformation) * f.determinant()

@@ -14,7 +14,7 @@ use nalgebra::{Matrix3, Vector3};
 
 /// History of one material point under an elastoplastic model.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PlasticState {
+pub struct History {
     /// Elastic part `F_e` of the deformation gradient (3×3; plane strain keeps `F_33 = 1` for the
     /// total `F`, not for `F_e`).
     pub elastic_deformation: Matrix3<f64>,
@@ -26,9 +26,9 @@ pub struct PlasticState {
     pub heating: f64,
 }
 
-impl Default for PlasticState {
+impl Default for History {
     fn default() -> Self {
-        PlasticState {
+        History {
             elastic_deformation: Matrix3::identity(),
             plastic_strain: 0.0,
             damage: 0.0,
@@ -313,11 +313,11 @@ impl DruckerPrager {
     /// total `det F = j`, over the step `dt` (which only the μ(I) rheology uses).
     pub fn update(
         &self,
-        state: &PlasticState,
+        state: &History,
         df: &Matrix3<f64>,
         j: f64,
         dt: f64,
-    ) -> (PlasticState, Matrix3<f64>) {
+    ) -> (History, Matrix3<f64>) {
         let fe = df * state.elastic_deformation;
         let svd = fe.svd(true, true);
         let (u, vt) = (svd.u.expect("U"), svd.v_t.expect("Vᵀ"));
@@ -328,7 +328,7 @@ impl DruckerPrager {
         let plastic = (2.0f64 / 3.0).sqrt() * (eps - eps_new).norm();
         let sigma = u * Matrix3::from_diagonal(&tau) * u.transpose() / j;
         (
-            PlasticState {
+            History {
                 elastic_deformation: fe_new,
                 plastic_strain: state.plastic_strain + plastic,
                 ..*state
@@ -528,7 +528,7 @@ mod tests {
     #[test]
     fn update_is_objective_and_accumulates_plastic_strain() {
         let dp = sand();
-        let mut state = PlasticState::default();
+        let mut state = History::default();
         let df = Matrix3::from_diagonal(&Vector3::new(0.995, 1.0, 1.0));
         let mut j = 1.0;
         let mut sigma = Matrix3::zeros();

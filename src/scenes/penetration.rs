@@ -224,7 +224,7 @@ impl Penetration {
                 msum += ps.mass[p];
                 lowest = lowest.min(ps.position[p][D - 1]);
             } else {
-                let d = ps.plastic[p].damage;
+                let d = ps.history[p].damage;
                 max_damage = max_damage.max(d);
                 failed += usize::from(d >= 1.0);
             }
@@ -293,7 +293,7 @@ pub fn joined_to_the_clamp<const D: usize>(
     clamp: f64,
 ) -> Vec<bool> {
     let intact: Vec<usize> = (0..ps.len())
-        .filter(|&p| ps.material[p] == plate && ps.plastic[p].damage < 1.0)
+        .filter(|&p| ps.material[p] == plate && ps.history[p].damage < 1.0)
         .collect();
     let stretch = |p: usize| {
         let f = crate::material::embed3(&ps.deformation_gradient[p]);
@@ -432,11 +432,11 @@ mod tests {
         let mut cut = intact.clone();
         for p in 0..cut.len() {
             if cut.material[p] == 0 && (cut.reference_position[p][0] - r).abs() < q / 2.0 {
-                cut.plastic[p].damage = 1.0;
+                cut.history[p].damage = 1.0;
             }
         }
         let band = (0..cut.len())
-            .filter(|&p| cut.plastic[p].damage >= 1.0)
+            .filter(|&p| cut.history[p].damage >= 1.0)
             .count();
         assert_eq!(band, 8, "one column through the plate");
         for (ps, what) in [
@@ -459,7 +459,7 @@ mod tests {
     fn count_inside(ps: &Particles<2>, r: f64) -> usize {
         (0..ps.len())
             .filter(|&p| {
-                ps.material[p] == 0 && ps.plastic[p].damage < 1.0 && ps.reference_position[p][0] < r
+                ps.material[p] == 0 && ps.history[p].damage < 1.0 && ps.reference_position[p][0] < r
             })
             .count()
     }

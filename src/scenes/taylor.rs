@@ -193,7 +193,7 @@ impl TaylorBar {
             reference_length,
             reference_radius,
             max_plastic_strain: ps
-                .plastic
+                .history
                 .iter()
                 .map(|s| s.plastic_strain)
                 .fold(0.0, f64::max),

@@ -451,9 +451,9 @@ impl<const D: usize> Sim<D> {
         ps.pressure.extend(std::iter::repeat_n(0.0, n));
         ps.material.extend(std::iter::repeat_n(material, n));
         // History (F_e, plastic strain) only once a history material has particles.
-        if !mat.is_elastic() || !ps.plastic.is_empty() {
-            ps.plastic
-                .resize(ps.position.len(), crate::material::PlasticState::default());
+        if !mat.is_elastic() || !ps.history.is_empty() {
+            ps.history
+                .resize(ps.position.len(), crate::material::History::default());
         }
         if apic {
             ps.affine.resize(ps.position.len(), Matrix::<D>::zeros());
@@ -535,7 +535,7 @@ impl<const D: usize> Sim<D> {
             .map(|p| {
                 let f = crate::material::embed3(&ps.deformation_gradient[p]);
                 ps.reference_volume[p]
-                    * self.materials[ps.material[p] as usize].stored_energy(&f, ps.plastic.get(p))
+                    * self.materials[ps.material[p] as usize].stored_energy(&f, ps.history.get(p))
             })
             .sum()
     }

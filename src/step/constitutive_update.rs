@@ -5,7 +5,7 @@
 
 use super::grid_to_particle::{Chunk, Finish, NewState, ParticleUpdate, CHUNK};
 use crate::grid::DomainBox;
-use crate::material::{block, embed3, pressure, Constitutive, Material, PlasticState};
+use crate::material::{block, embed3, pressure, Constitutive, History, Material};
 use crate::options::Walls;
 use crate::particles::Particles;
 use crate::Matrix;
@@ -27,12 +27,7 @@ pub(super) struct ConstitutiveUpdate<'a, const D: usize> {
 impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
     // Always inlined into the gather, which keeps the new state in registers.
     #[inline(always)]
-    fn finish(
-        &self,
-        p: usize,
-        u: &mut ParticleUpdate<D>,
-        history: &mut PlasticState,
-    ) -> Option<f64> {
+    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut History) -> Option<f64> {
         let j = crate::determinant(&u.deformation_gradient);
         if j.is_nan() || j <= 0.0 {
             // Inverted or not finite: the checks reject the step; no stress to compute.
@@ -51,7 +46,7 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
             let f = embed3(&u.deformation_gradient);
             let f_old = embed3(&ps.deformation_gradient[p]);
             let df = f * f_old.try_inverse().unwrap_or_else(Matrix3::identity);
-            let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, self.dt);
+            let (state, s3) = material.plastic_update(&ps.history[p], &df, j, self.dt);
             *history = state;
             (block(&s3), pressure(&s3))
         };
@@ -123,11 +118,11 @@ impl<const D: usize> ConstitutiveUpdate<'_, D> {
         admissible
             .par_iter_mut()
             .enumerate()
-            .map_init(PlasticState::default, |scratch, (p, ok)| {
+            .map_init(History::default, |scratch, (p, ok)| {
                 // SAFETY: every particle index is visited by one task only.
                 unsafe {
                     let mut u = writer.get(p);
-                    let finished = self.finish(p, &mut u, writer.plastic(p).unwrap_or(scratch));
+                    let finished = self.finish(p, &mut u, writer.history(p).unwrap_or(scratch));
                     writer.store(p, &u);
                     *ok = finished.is_some();
                     (finished.unwrap_or(0.0), *ok)

@@ -4,7 +4,7 @@ use super::TransferPlan;
 use crate::cpu::Lanes;
 use crate::error::ErrorKind;
 use crate::grid::{DomainBox, Grid, GridNodes, SharedSlice};
-use crate::material::PlasticState;
+use crate::material::History;
 use crate::particles::Particles;
 use crate::shape::StencilView;
 use crate::{Matrix, Vector};
@@ -39,7 +39,7 @@ impl<const D: usize> Default for ParticleUpdate<D> {
 
 /// The new particle state of a step, stored as the particles are (one `Vec` per quantity), and
 /// swapped with theirs when the step succeeds: the commit moves no data. `affine` is empty
-/// unless APIC runs, `plastic` unless the particles carry history.
+/// unless APIC runs, `history` unless the particles carry history.
 #[derive(Debug, Default, Clone)]
 pub struct NewState<const D: usize> {
     pub position: Vec<Vector<D>>,
@@ -49,7 +49,7 @@ pub struct NewState<const D: usize> {
     pub stress: Vec<Matrix<D>>,
     pub pressure: Vec<f64>,
     /// Written for history particles only; the commit copies those.
-    pub plastic: Vec<PlasticState>,
+    pub history: Vec<History>,
 }
 
 impl<const D: usize> NewState<D> {
@@ -63,8 +63,7 @@ impl<const D: usize> NewState<D> {
         self.deformation_gradient.resize(n, Matrix::identity());
         self.stress.resize(n, Matrix::zeros());
         self.pressure.resize(n, 0.0);
-        self.plastic
-            .resize(ps.plastic.len(), PlasticState::default());
+        self.history.resize(ps.history.len(), History::default());
     }
 
     /// Particle `p`'s new state.
@@ -88,7 +87,7 @@ impl<const D: usize> NewState<D> {
             + b(&self.deformation_gradient)
             + b(&self.stress)
             + b(&self.pressure)
-            + b(&self.plastic)
+            + b(&self.history)
     }
 
     /// Write access for the parallel per-particle passes.
@@ -100,7 +99,7 @@ impl<const D: usize> NewState<D> {
             deformation_gradient: SharedSlice::new(&mut self.deformation_gradient),
             stress: SharedSlice::new(&mut self.stress),
             pressure: SharedSlice::new(&mut self.pressure),
-            plastic: SharedSlice::new(&mut self.plastic),
+            history: SharedSlice::new(&mut self.history),
         }
     }
 }
@@ -113,7 +112,7 @@ pub struct NewStateWriter<'a, const D: usize> {
     deformation_gradient: SharedSlice<'a, Matrix<D>>,
     stress: SharedSlice<'a, Matrix<D>>,
     pressure: SharedSlice<'a, f64>,
-    plastic: SharedSlice<'a, PlasticState>,
+    history: SharedSlice<'a, History>,
 }
 
 impl<const D: usize> NewStateWriter<'_, D> {
@@ -177,8 +176,8 @@ impl<const D: usize> NewStateWriter<'_, D> {
     /// No other thread accesses particle `p`'s new state meanwhile.
     #[allow(clippy::mut_from_ref)]
     #[inline(always)]
-    pub unsafe fn plastic(&self, p: usize) -> Option<&mut PlasticState> {
-        (!self.plastic.is_empty()).then(|| self.plastic.at(p))
+    pub unsafe fn history(&self, p: usize) -> Option<&mut History> {
+        (!self.history.is_empty()).then(|| self.history.at(p))
     }
 }
 
@@ -268,12 +267,7 @@ pub fn mls_velocity_gradient<const D: usize>(
 pub trait Finish<const D: usize>: Sync {
     /// `None` when the new state is not admissible; otherwise the particle's signal speed
     /// `c + |v|` in it, of which the next step's stability check takes the maximum.
-    fn finish(
-        &self,
-        p: usize,
-        u: &mut ParticleUpdate<D>,
-        history: &mut PlasticState,
-    ) -> Option<f64>;
+    fn finish(&self, p: usize, u: &mut ParticleUpdate<D>, history: &mut History) -> Option<f64>;
 
     /// [`Finish::finish`] for the particles of a chunk of grid to particle (at most 8, `us[k]`
     /// the new state of particle `chunk.particle(k)`) at once, when the chunk allows it (all of
@@ -335,7 +329,7 @@ impl Chunk<'_> {
 pub struct NoFinish;
 
 impl<const D: usize> Finish<D> for NoFinish {
-    fn finish(&self, _: usize, _: &mut ParticleUpdate<D>, _: &mut PlasticState) -> Option<f64> {
+    fn finish(&self, _: usize, _: &mut ParticleUpdate<D>, _: &mut History) -> Option<f64> {
         Some(0.0)
     }
 }
@@ -501,7 +495,7 @@ where
     admissible
         .par_chunks_mut(CHUNK)
         .enumerate()
-        .map_init(PlasticState::default, |scratch, (c, ok)| {
+        .map_init(History::default, |scratch, (c, ok)| {
             lanes.wide(
                 #[inline(always)]
                 || {
@@ -538,7 +532,7 @@ where
                             Some(f) => f.finish(
                                 chunk.particle(k),
                                 u,
-                                unsafe { writer.plastic(slot) }.unwrap_or(scratch),
+                                unsafe { writer.history(slot) }.unwrap_or(scratch),
                             ),
                             None => Some(0.0),
                         };

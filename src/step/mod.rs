@@ -395,10 +395,10 @@ impl<const D: usize> Step<'_, D> {
             ps.permute_carried(order, &mut self.work.spare);
         }
         let materials = &self.materials;
-        ps.plastic
+        ps.history
             .par_iter_mut()
             .zip(&ps.material)
-            .zip(&new.plastic)
+            .zip(&new.history)
             .filter(|((_, &m), _)| !materials[m as usize].is_elastic())
             .for_each(|((state, _), new)| *state = *new);
         self.work.signal_speed = Some(self.work.new_signal_speed);

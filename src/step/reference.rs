@@ -260,8 +260,8 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
             material.elastic_stress_and_wave_speed(&f, j).0
         } else {
             let df = embed3(&f) * embed3(&ps.deformation_gradient[p]).try_inverse().unwrap();
-            let (state, s3) = material.plastic_update(&ps.plastic[p], &df, j, dt);
-            new.plastic[p] = state;
+            let (state, s3) = material.plastic_update(&ps.history[p], &df, j, dt);
+            new.history[p] = state;
             (block(&s3), pressure(&s3))
         };
         if sim.options.walls.any_wall() {

@@ -2,7 +2,7 @@
 //! solution, wall conditions, and the guards that keep the last good state.
 
 use crate::error::ErrorKind;
-use crate::material::{Material, PlasticState};
+use crate::material::{History, Material};
 use crate::options::{Boundary, FastPaths, Scheme, Shape, Side, Transfer};
 use crate::particles::{Field, Particles};
 use crate::scenes::{run_vibrating_bar, VibratingBar};
@@ -785,7 +785,7 @@ fn results_do_not_depend_on_the_instruction_set() {
         if plastic {
             let yielded = sim
                 .particles()
-                .plastic
+                .history
                 .iter()
                 .filter(|s| s.plastic_strain > 0.0);
             assert!(yielded.count() > 0, "the soil block did not yield");
@@ -880,7 +880,7 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
             let expected: Vec<Option<f64>> = alone
                 .iter_mut()
                 .enumerate()
-                .map(|(p, u)| finish.finish(p, u, &mut PlasticState::default()))
+                .map(|(p, u)| finish.finish(p, u, &mut History::default()))
                 .collect();
             assert!(expected[5].is_none() && expected[0].is_some());
             assert_eq!(alone[3].position[0], 0.0);
@@ -1460,7 +1460,7 @@ fn sorting_in_grid_to_particle_is_sorting_at_the_commit() {
     );
     let yielded = gathered
         .particles()
-        .plastic
+        .history
         .iter()
         .filter(|s| s.plastic_strain > 0.0);
     assert!(yielded.count() > 0, "the soil did not yield");
@@ -1481,7 +1481,7 @@ fn the_signal_speed_a_step_carries_is_the_one_taken_afresh() {
         let m = sim.add_material(material);
         sim.particles.material.iter_mut().for_each(|k| *k = m);
         let n = sim.particles.len();
-        sim.particles.plastic.resize(n, PlasticState::default());
+        sim.particles.history.resize(n, History::default());
         if rigid {
             sim.set_contact(Some(0.2)).unwrap();
             let slab = sim.add_material(Material::rigid(7800.0, [0.0; 3]).unwrap());

@@ -429,15 +429,15 @@ fn summary<const D: usize>(
         sim.strain_energy()
     );
     let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-    if !ps.plastic.is_empty() {
-        let plastic: Vec<f64> = ps.plastic.iter().map(|s| s.plastic_strain).collect();
+    if !ps.history.is_empty() {
+        let plastic: Vec<f64> = ps.history.iter().map(|s| s.plastic_strain).collect();
         // Damage only where a material has it (Johnson–Cook), not for soil.
         let damages = sim
             .materials()
             .iter()
             .any(|m| matches!(m, rkmpm::material::Material::JohnsonCook(_)));
         if damages {
-            let damage: Vec<f64> = ps.plastic.iter().map(|s| s.damage).collect();
+            let damage: Vec<f64> = ps.history.iter().map(|s| s.damage).collect();
             println!(
                 "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
                 largest(&plastic),
