@@ -12,12 +12,12 @@
 //! for all particles of the block; divide by the particle count for ns per particle.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use rkmpm::boundary::Walls;
 use rkmpm::grid::{Grid, GridNodes};
 use rkmpm::integration::{BoundaryPoints, VcCorrection};
 use rkmpm::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use rkmpm::step::{grid_to_particle, grid_update, particle_to_grid, Bins, Fields, Forces};
 use rkmpm::step::{NewState, NoFinish, TransferPlan};
+use rkmpm::walls::Walls;
 use rkmpm::{Material, Particles, Shape, Sim, Vector};
 use std::time::Duration;
 

@@ -25,7 +25,9 @@ pub struct Lanes {
 
 impl Lanes {
     /// The portable baseline code.
-    pub const BASELINE: Lanes = Lanes { avx2: false };
+    pub const fn baseline() -> Lanes {
+        Lanes { avx2: false }
+    }
 
     /// AVX2 and FMA when the processor has them and `RKMPM_PORTABLE=1` is not set; else the
     /// baseline. Detected once per process.
@@ -46,7 +48,7 @@ impl Lanes {
     pub fn chosen(vector_instructions: bool) -> Lanes {
         match vector_instructions {
             true => Lanes::detect(),
-            false => Lanes::BASELINE,
+            false => Lanes::baseline(),
         }
     }
 

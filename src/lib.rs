@@ -22,7 +22,15 @@
 //! assert_eq!(sim.steps(), 1);
 //! ```
 
-pub mod boundary;
+pub mod walls;
+
+/// The walls' old path.
+#[deprecated(note = "renamed to `rkmpm::walls`")]
+pub mod boundary {
+    pub use crate::walls::*;
+    #[deprecated(note = "renamed to `Wall`")]
+    pub type Boundary = crate::options::Wall;
+}
 pub mod contact;
 pub mod cpu;
 pub mod error;
@@ -40,13 +48,13 @@ pub mod sim;
 pub mod step;
 pub mod verification;
 
-pub use boundary::{Boundary, Side};
 pub use error::{Error, ErrorKind, Result};
 pub use grid::Grid;
 pub use material::Material;
 pub use particles::{Field, Particles};
 pub use shape::Shape;
 pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer};
+pub use walls::{Side, Wall};
 
 /// A column vector of the simulation's dimension.
 pub type Vector<const D: usize> = nalgebra::SVector<f64, D>;

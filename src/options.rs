@@ -178,7 +178,7 @@ pub enum Scheme {
 
 /// The condition on one face of the grid (a wall); `boundary` applies it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Boundary {
+pub enum Wall {
     #[default]
     Free,
     /// No velocity on the face (no-slip).
@@ -189,7 +189,7 @@ pub enum Boundary {
     Friction(f64),
 }
 
-/// Which [`Boundary`], without its friction (`RKMPM_BOUNDARY_*`; scene files: `kind` of a wall).
+/// Which [`Wall`], without its friction (`RKMPM_BOUNDARY_*`; scene files: `kind` of a wall).
 #[repr(u32)]
 #[derive(
     Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
@@ -203,31 +203,31 @@ pub enum WallKind {
     Friction = 3,
 }
 
-impl Boundary {
+impl Wall {
     pub fn kind(&self) -> WallKind {
         match self {
-            Boundary::Free => WallKind::Free,
-            Boundary::Fixed => WallKind::Fixed,
-            Boundary::Slip => WallKind::Slip,
-            Boundary::Friction(_) => WallKind::Friction,
+            Wall::Free => WallKind::Free,
+            Wall::Fixed => WallKind::Fixed,
+            Wall::Slip => WallKind::Slip,
+            Wall::Friction(_) => WallKind::Friction,
         }
     }
 
     /// The friction coefficient (0 for a wall without friction).
     pub fn friction(&self) -> f64 {
         match *self {
-            Boundary::Friction(mu) => mu,
+            Wall::Friction(mu) => mu,
             _ => 0.0,
         }
     }
 
     /// The wall of `kind`; `friction` is read only for [`WallKind::Friction`].
-    pub fn from_kind(kind: WallKind, friction: f64) -> Boundary {
+    pub fn from_kind(kind: WallKind, friction: f64) -> Wall {
         match kind {
-            WallKind::Free => Boundary::Free,
-            WallKind::Fixed => Boundary::Fixed,
-            WallKind::Slip => Boundary::Slip,
-            WallKind::Friction => Boundary::Friction(friction),
+            WallKind::Free => Wall::Free,
+            WallKind::Fixed => Wall::Fixed,
+            WallKind::Slip => Wall::Slip,
+            WallKind::Friction => Wall::Friction(friction),
         }
     }
 }
@@ -243,13 +243,13 @@ pub enum Side {
 /// The conditions on all `2 D` faces.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Walls<const D: usize> {
-    pub faces: [[Boundary; 2]; D],
+    pub faces: [[Wall; 2]; D],
 }
 
 impl<const D: usize> Default for Walls<D> {
     fn default() -> Self {
         Walls {
-            faces: [[Boundary::Free; 2]; D],
+            faces: [[Wall::Free; 2]; D],
         }
     }
 }
@@ -306,7 +306,7 @@ mod tests {
             assert_eq!(Shape::from_kind(k, 2, 3.0).kind(), k);
             let w = WallKind::try_from(code).unwrap();
             assert_eq!(u32::from(w), code);
-            assert_eq!(Boundary::from_kind(w, 0.5).kind(), w);
+            assert_eq!(Wall::from_kind(w, 0.5).kind(), w);
         }
         for code in 0..3u32 {
             let k = TransferKind::try_from(code).unwrap();
@@ -342,10 +342,10 @@ mod tests {
             Transfer::from_kind(TransferKind::PicFlip, 0.25),
             Transfer::PicFlip { flip: 0.25 }
         );
-        assert_eq!(Boundary::Friction(0.3).friction(), 0.3);
+        assert_eq!(Wall::Friction(0.3).friction(), 0.3);
         assert_eq!(
-            Boundary::from_kind(WallKind::Friction, 0.3),
-            Boundary::Friction(0.3)
+            Wall::from_kind(WallKind::Friction, 0.3),
+            Wall::Friction(0.3)
         );
         let o = Options::<2>::default();
         assert_eq!((o.shape, o.transfer), (Shape::BSpline2, Transfer::Apic));

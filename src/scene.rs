@@ -33,7 +33,7 @@
 use crate::error::{Error, ErrorKind, Result};
 use crate::material::{JohnsonCookParameters, Material, MieGruneisen};
 use crate::options::{
-    Boundary, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind,
+    Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind, Wall,
     WallKind,
 };
 use crate::sim::Sim;
@@ -384,8 +384,8 @@ impl Scene {
             sim.set_contact(Some(mu)).map_err(context("options"))?;
         }
         for (k, w) in self.walls.iter().enumerate() {
-            let kind = Boundary::from_kind(w.kind, w.friction);
-            sim.set_boundary(w.axis, w.side, kind)
+            let kind = Wall::from_kind(w.kind, w.friction);
+            sim.set_wall(w.axis, w.side, kind)
                 .map_err(context(&format!("walls[{k}]")))?;
         }
         let mut ids = Vec::new();

@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::material::Material;
-use crate::options::{Boundary, Integration, Shape, Side, Transfer};
+use crate::options::{Integration, Shape, Side, Transfer, Wall};
 use crate::shape::UniformRng;
 use crate::sim::Sim;
 use crate::{Matrix, Vector};
@@ -269,8 +269,8 @@ pub fn run_mms_placed<const D: usize>(
     sim.set_transfer(transfer)?;
     sim.set_integration(integration)?;
     for a in 0..D {
-        sim.set_boundary(a, Side::Low, Boundary::Slip)?;
-        sim.set_boundary(a, Side::High, Boundary::Slip)?;
+        sim.set_wall(a, Side::Low, Wall::Slip)?;
+        sim.set_wall(a, Side::High, Wall::Slip)?;
     }
     let mat = sim.add_material(Material::neo_hookean(mms.density, mms.young, mms.poisson)?);
     let (x, vol) = placement.particles::<D>(cells, ppc, h)?;
@@ -486,9 +486,9 @@ impl SelfWeightColumn {
         sim.set_shape(shape)?;
         sim.set_transfer(transfer)?;
         sim.set_integration(integration)?;
-        sim.set_boundary(0, Side::Low, Boundary::Slip)?;
-        sim.set_boundary(0, Side::High, Boundary::Slip)?;
-        sim.set_boundary(1, Side::Low, Boundary::Fixed)?;
+        sim.set_wall(0, Side::Low, Wall::Slip)?;
+        sim.set_wall(0, Side::High, Wall::Slip)?;
+        sim.set_wall(1, Side::Low, Wall::Fixed)?;
         let mat = sim.add_material(Material::neo_hookean(
             self.density,
             self.young,

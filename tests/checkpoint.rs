@@ -2,8 +2,8 @@
 //! data bit for bit as the uninterrupted run; damaged files are refused; a failed save leaves
 //! the previous checkpoint as it was.
 
-use rkmpm::boundary::{Boundary, Side};
 use rkmpm::scenes::{colliding_disks, GranularColumn, Penetration, TaylorBar};
+use rkmpm::walls::{Side, Wall};
 use rkmpm::{ErrorKind, Integration, Material, Shape, Sim, Transfer, Vector};
 use std::path::PathBuf;
 
@@ -77,9 +77,8 @@ fn rk2_vc2_block_on_walls_musl() {
         sim.set_integration(Integration::Vc { order: 2 }).unwrap();
         sim.set_transfer(Transfer::PicFlip { flip: 0.5 }).unwrap();
         sim.set_scheme(rkmpm::Scheme::Musl).unwrap();
-        sim.set_boundary(1, Side::Low, Boundary::Friction(0.3))
-            .unwrap();
-        sim.set_boundary(0, Side::Low, Boundary::Slip).unwrap();
+        sim.set_wall(1, Side::Low, Wall::Friction(0.3)).unwrap();
+        sim.set_wall(0, Side::Low, Wall::Slip).unwrap();
         sim.set_gravity([0.0, -9.81]).unwrap();
         let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
         let x: Vec<Vector<2>> = (0..64)

@@ -2,7 +2,7 @@
 //! bodies with a prescribed velocity.
 
 use rkmpm::{
-    Boundary, ErrorKind, Field, Integration, Material, Scheme, Shape, Side, Sim, Transfer, Vector,
+    ErrorKind, Field, Integration, Material, Scheme, Shape, Side, Sim, Transfer, Vector, Wall,
 };
 
 /// A rectangle of `nx × ny` particles of spacing `q` with lower-left corner `corner`.
@@ -134,7 +134,7 @@ fn vc_with_contact_on_one_body_is_vc_without_contact() {
         .unwrap();
         sim.set_integration(Integration::Vc { order: 1 }).unwrap();
         sim.set_gravity([0.0, -9.81]).unwrap();
-        sim.set_boundary(1, Side::Low, Boundary::Slip).unwrap();
+        sim.set_wall(1, Side::Low, Wall::Slip).unwrap();
         let a = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
         let q = h / 2.0;
         sim.add_particles(a, &block([0.3, 0.0], 12, q), &[q * q; 144], None)

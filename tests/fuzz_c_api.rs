@@ -400,11 +400,10 @@ proptest! {
 /// Johnson–Cook is not needed: the history layout is shared), boundary points with tractions,
 /// walls, gravity and a few steps taken.
 fn rich_checkpoint() -> Vec<u8> {
-    use rkmpm::boundary::{Boundary, Side};
+    use rkmpm::walls::{Side, Wall};
     use rkmpm::{Material, Sim, Vector};
     let mut sim = Sim::<2>::new([0.0, 0.0], [8, 8], 0.125).unwrap();
-    sim.set_boundary(1, Side::Low, Boundary::Friction(0.3))
-        .unwrap();
+    sim.set_wall(1, Side::Low, Wall::Friction(0.3)).unwrap();
     sim.set_gravity([0.0, -9.81]).unwrap();
     let soil =
         sim.add_material(Material::drucker_prager(1800.0, 1e6, 0.3, 30.0, 0.0, 0.0).unwrap());

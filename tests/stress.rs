@@ -3,7 +3,7 @@
 //! last good state; the measured figures are printed (`cargo test --release --test stress --
 //! --nocapture`) and recorded in docs/ROBUSTNESS.md.
 
-use rkmpm::boundary::{Boundary, Side};
+use rkmpm::walls::{Side, Wall};
 use rkmpm::{ErrorKind, Material, Shape, Sim, Transfer, Vector};
 
 /// Particles on a regular lattice, `per_cell` per cell and direction, filling the box
@@ -136,7 +136,7 @@ fn a_grid_too_large_for_memory_is_refused() {
 fn a_stiffness_ratio_of_a_million() {
     let h = 1.0 / 16.0;
     let mut sim = Sim::<2>::new([0.0, 0.0], [16, 16], h).unwrap();
-    sim.set_boundary(1, Side::Low, Boundary::Fixed).unwrap();
+    sim.set_wall(1, Side::Low, Wall::Fixed).unwrap();
     let g = 9.81;
     sim.set_gravity([0.0, -g]).unwrap();
     let stiff = sim.add_material(Material::neo_hookean(1000.0, 1e10, 0.3).unwrap());
@@ -259,11 +259,11 @@ fn particles_packed_against_a_wall() {
         },
     ];
     for shape in shapes {
-        for wall in [Boundary::Fixed, Boundary::Slip, Boundary::Friction(0.5)] {
+        for wall in [Wall::Fixed, Wall::Slip, Wall::Friction(0.5)] {
             let mut sim = Sim::<2>::new([0.0, 0.0], [8, 8], h).unwrap();
             sim.set_shape(shape).unwrap();
             sim.set_transfer(Transfer::PicFlip { flip: 0.9 }).unwrap();
-            sim.set_boundary(0, Side::Low, wall).unwrap();
+            sim.set_wall(0, Side::Low, wall).unwrap();
             sim.set_gravity([-9.81, -1.0]).unwrap();
             let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
             let s = h / 8.0;

@@ -136,7 +136,7 @@ fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: T
     if let Some(order) = order {
         sim.set_integration(Integration::Vc { order }).unwrap();
     }
-    sim.set_boundary(1, rkmpm::Side::Low, rkmpm::Boundary::Friction(0.3))
+    sim.set_wall(1, rkmpm::Side::Low, rkmpm::Wall::Friction(0.3))
         .unwrap();
     let mut g = V::<D>::zeros();
     g[1] = -9.81;

@@ -27,9 +27,9 @@
 //!
 //! Ends with the run-out and height exponents fitted over the aspect ratios ≥ 1.5.
 
-use rkmpm::boundary::Boundary;
 use rkmpm::material::InertialRheology;
 use rkmpm::scenes::{log_log_slope, thick_front, Gate, GranularColumn, NGUYEN_BUI_FUKAGAWA};
+use rkmpm::walls::Wall;
 use rkmpm::{Integration, Shape};
 
 /// One aspect ratio's normalized results for the exponents: aspect ratio, run-out, height, and
@@ -70,9 +70,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     base.dilatancy_degrees = value("--dilatancy").map_or(Ok(0.0), |v| v.parse())?;
     let wall = value("--wall").unwrap_or_else(|| "slip".into());
     base.wall = match wall.as_str() {
-        "slip" => Boundary::Slip,
-        "friction" => Boundary::Friction(mu),
-        "fixed" => Boundary::Fixed,
+        "slip" => Wall::Slip,
+        "friction" => Wall::Friction(mu),
+        "fixed" => Wall::Fixed,
         other => return Err(format!("--wall slip|friction|fixed, got {other}").into()),
     };
     let method = value("--method").unwrap_or_else(|| "bspline2".into());

@@ -15,7 +15,7 @@ pub mod status;
 
 use crate::io::vtk::{self, VtkSeries};
 use crate::material::Material;
-use crate::options::{Boundary, Integration, Scheme, Shape, Side, Transfer};
+use crate::options::{Integration, Scheme, Shape, Side, Transfer, Wall};
 use crate::particles::Field;
 use crate::sim::{BodyForce, Sim};
 use crate::Vector;
@@ -581,8 +581,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_boundary(
     gate("rkmpm_sim_set_boundary", || {
         let s = sim_mut(sim)?;
         let side = Side::from_sign(side)?;
-        let boundary = Boundary::from_kind(kind_of("boundary", kind)?, friction);
-        with_sim!(&mut s.sim, m => m.set_boundary(axis as usize, side, boundary))?;
+        let boundary = Wall::from_kind(kind_of("boundary", kind)?, friction);
+        with_sim!(&mut s.sim, m => m.set_wall(axis as usize, side, boundary))?;
         Ok(())
     })
 }

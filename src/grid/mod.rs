@@ -4,7 +4,7 @@
 //! of extra nodes, so that every shape function has its full stencil for any particle inside the
 //! domain: partition of unity and linear reproduction then hold up to the grid's faces with no
 //! boundary-modified splines. Wall conditions fold the ghost layers back onto the domain (see
-//! [`crate::boundary`]).
+//! [`crate::walls`]).
 //!
 //! Node storage is dense, but a step only visits the nodes that particles touched (the
 //! `active` list) and resets only those.

@@ -7,7 +7,7 @@ use crate::material::{Constitutive, Material};
 use crate::options::{Integration, Shape, Side, Transfer};
 use crate::shape::tests::TestRng;
 use crate::sim::Sim;
-use crate::{Boundary, Matrix};
+use crate::{Matrix, Wall};
 
 /// A box body `[0.3, 0.7]^D` on a grid of spacing 0.1, 2 particles per cell per direction
 /// jittered by up to ±`jitter` of their sub-cell, and boundary points at the lattice face centres.
@@ -241,7 +241,7 @@ fn patch_test_uniform_stress_stays_uniform_with_vc() {
         sim.boundary = BoundaryPoints::default();
         sim.add_boundary_points(&b.position, &b.area_normal, Some(&t))
             .unwrap();
-        sim.set_boundary(0, Side::Low, Boundary::Free).unwrap();
+        sim.set_wall(0, Side::Low, Wall::Free).unwrap();
         let dt = sim.stable_dt(0.3).unwrap();
         for _ in 0..5 {
             sim.step(dt).unwrap();

@@ -22,8 +22,8 @@ use crate::material::{
     JohnsonCookParameters, LinearElastic, Material, MieGruneisen, NeoHookean, Rigid,
 };
 use crate::options::{
-    Boundary, Contact, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Transfer,
-    TransferKind, Walls,
+    Contact, Integration, IntegrationKind, Scheme, Shape, ShapeKind, Transfer, TransferKind, Wall,
+    Walls,
 };
 use crate::particles::Particles;
 use crate::sim::Sim;
@@ -335,7 +335,7 @@ fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> 
     let mut walls = Walls::<D>::default();
     for face in walls.faces.iter_mut().flatten() {
         let (tag, mu) = (r.u32()?, r.f64()?);
-        *face = Boundary::from_kind(kind("wall", tag)?, mu);
+        *face = Wall::from_kind(kind("wall", tag)?, mu);
     }
     let contact_on = r.u32()?;
     let friction = r.f64()?;
@@ -346,8 +346,8 @@ fn read_options<const D: usize>(r: &mut Reader, sim: &mut Sim<D>) -> Result<()> 
     sim.set_scheme(scheme)?;
     sim.set_gravity(gravity)?;
     for a in 0..D {
-        for s in [crate::boundary::Side::Low, crate::boundary::Side::High] {
-            sim.set_boundary(a, s, walls.faces[a][s as usize])?;
+        for s in [crate::walls::Side::Low, crate::walls::Side::High] {
+            sim.set_wall(a, s, walls.faces[a][s as usize])?;
         }
     }
     sim.options.contact = (contact_on == 1).then_some(Contact { friction });

@@ -1,11 +1,11 @@
 //! Plane-strain collapse of a granular column (aluminium-rod-like material) against a wall, and
 //! the power laws measured for true two-dimensional columns.
 
-use crate::boundary::{Boundary, Side};
 use crate::error::{Error, Result};
 use crate::material::{DruckerPrager, ElasticConstants, InertialRheology, Material};
 use crate::shape::Shape;
 use crate::sim::{Integration, Sim, Transfer};
+use crate::walls::{Side, Wall};
 use crate::Vector;
 
 /// Measured laws for true 2D columns of aluminium rods, Nguyen, Bui & Fukagawa (2015), "Failure
@@ -60,7 +60,7 @@ pub struct GranularColumn {
     pub floor_friction: f64,
     /// The wall at `x = 0` the column stands against (slip by default, as in the experiments'
     /// smooth glass; `Friction(μ)` or `Fixed` for the sensitivity study).
-    pub wall: Boundary,
+    pub wall: Wall,
     pub gravity: f64,
     /// Simulated time, in units of `sqrt(H0 / g)` (the flow stops after about 3–4).
     pub duration: f64,
@@ -107,7 +107,7 @@ impl Default for GranularColumn {
             dilatancy_degrees: 0.0,
             cohesion: 0.0,
             floor_friction: friction.to_radians().tan(),
-            wall: Boundary::Slip,
+            wall: Wall::Slip,
             gravity: 9.81,
             duration: 8.0,
             shape: Shape::BSpline2,
@@ -173,8 +173,8 @@ impl GranularColumn {
         sim.set_shape(self.shape)?;
         sim.set_integration(self.integration)?;
         sim.set_transfer(self.transfer)?;
-        sim.set_boundary(0, Side::Low, self.wall)?;
-        sim.set_boundary(1, Side::Low, Boundary::Friction(self.floor_friction))?;
+        sim.set_wall(0, Side::Low, self.wall)?;
+        sim.set_wall(1, Side::Low, Wall::Friction(self.floor_friction))?;
         sim.set_gravity([0.0, -self.gravity])?;
         let soil = DruckerPrager::new(
             ElasticConstants::new(self.density, self.young, self.poisson)?,

@@ -1,10 +1,10 @@
 //! Ready-made scenes with exact answers, shared by the tests, the examples and the runner.
 
-use crate::boundary::{Boundary, Side};
 use crate::error::Result;
 use crate::material::Material;
 use crate::shape::Shape;
 use crate::sim::{Sim, Transfer};
+use crate::walls::{Side, Wall};
 use crate::Vector;
 use std::f64::consts::PI;
 
@@ -109,7 +109,7 @@ impl VibratingBar {
         let mut sim = Sim::<D>::new(Vector::<D>::zeros(), cells, h)?;
         sim.set_shape(Shape::BSpline2)?;
         sim.set_transfer(Transfer::Apic)?;
-        sim.set_boundary(0, Side::Low, Boundary::Fixed)?;
+        sim.set_wall(0, Side::Low, Wall::Fixed)?;
         let m = sim.add_material(Material::linear_elastic(self.density, self.young, 0.0)?);
         let x = self.positions::<D>();
         let vol = vec![(h / 2.0).powi(D as i32); x.len()];

@@ -15,7 +15,7 @@
 
 use crate::error::{Error, Result};
 use crate::material::{JohnsonCookParameters, Material};
-use crate::options::{Boundary, Integration, Shape, Side, Transfer};
+use crate::options::{Integration, Shape, Side, Transfer, Wall};
 use crate::particles::Particles;
 use crate::sim::Sim;
 use crate::Vector;
@@ -140,8 +140,8 @@ impl Penetration {
         sim.set_integration(self.integration)?;
         sim.set_contact(Some(self.friction))?;
         for axis in 0..D - 1 {
-            sim.set_boundary(axis, Side::Low, Boundary::Slip)?;
-            sim.set_boundary(axis, Side::High, Boundary::Fixed)?;
+            sim.set_wall(axis, Side::Low, Wall::Slip)?;
+            sim.set_wall(axis, Side::High, Wall::Fixed)?;
         }
         let weldox = match self.failure_band {
             Some(band) => weldox_460e().regularized(band, h)?,

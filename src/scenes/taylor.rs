@@ -14,7 +14,7 @@
 
 use crate::error::{Error, Result};
 use crate::material::{JohnsonCookParameters, Material};
-use crate::options::{Boundary, Integration, Shape, Side, Transfer};
+use crate::options::{Integration, Shape, Side, Transfer, Wall};
 use crate::sim::Sim;
 use crate::Vector;
 
@@ -127,7 +127,7 @@ impl TaylorBar {
         sim.set_integration(self.integration)?;
         sim.set_transfer(self.transfer)?;
         for axis in 0..3 {
-            sim.set_boundary(axis, Side::Low, Boundary::Slip)?;
+            sim.set_wall(axis, Side::Low, Wall::Slip)?;
         }
         let mat = sim.add_material(Material::johnson_cook(
             self.material.unwrap_or(self.case.material()),

@@ -9,7 +9,7 @@ use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
-use crate::options::{Boundary, FastPaths, Shape, Side};
+use crate::options::{FastPaths, Shape, Side, Wall};
 pub use crate::options::{Integration, Options, Scheme, Transfer};
 use crate::particles::{Field, Particles};
 use crate::shape::ShapeFunction;
@@ -227,16 +227,22 @@ impl<const D: usize> Sim<D> {
         Ok(())
     }
 
-    /// Sets the condition on one face; may change between steps.
-    pub fn set_boundary(&mut self, axis: usize, side: Side, boundary: Boundary) -> Result<()> {
+    /// Sets the wall on one face of the grid; may change between steps.
+    pub fn set_wall(&mut self, axis: usize, side: Side, wall: Wall) -> Result<()> {
         if axis >= D {
             return Err(Error::invalid(format!(
                 "axis must be below the dimension {D}, got {axis}"
             )));
         }
-        boundary.validate()?;
-        self.options.walls.faces[axis][side as usize] = boundary;
+        wall.validate()?;
+        self.options.walls.faces[axis][side as usize] = wall;
         Ok(())
+    }
+
+    /// The old name of [`Sim::set_wall`].
+    #[deprecated(note = "renamed to `set_wall`")]
+    pub fn set_boundary(&mut self, axis: usize, side: Side, wall: Wall) -> Result<()> {
+        self.set_wall(axis, side, wall)
     }
 
     /// Sets (or with `None` removes) the body-force field.

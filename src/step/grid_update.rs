@@ -137,7 +137,7 @@ pub fn grid_update<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::boundary::Boundary;
+    use crate::walls::Wall;
 
     /// With nothing mapped to `force`, the momentum-only update (`no_force`) gives the node
     /// velocities of the whole update bit for bit, signed zeros and a slip wall included.
@@ -147,7 +147,7 @@ mod tests {
         let mut nodes = GridNodes::<2>::default();
         nodes.ensure(&grid, false, false, false).unwrap();
         let mut walls = Walls::<2>::default();
-        walls.faces[0][0] = Boundary::Slip;
+        walls.faces[0][0] = Wall::Slip;
         for n in 0..grid.node_count() {
             let k = n as f64;
             nodes.mass[n] = if n % 7 == 3 {

@@ -291,7 +291,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::options::{Boundary, Scheme, Side};
+    use crate::options::{Scheme, Side, Wall};
     use crate::shape::UniformRng;
     use crate::{Field, Material};
     use proptest::prelude::*;
@@ -360,13 +360,9 @@ mod tests {
         sim.set_scheme(scheme).unwrap();
         for a in 0..D {
             for (k, side) in [Side::Low, Side::High].into_iter().enumerate() {
-                let wall = [
-                    Boundary::Free,
-                    Boundary::Fixed,
-                    Boundary::Slip,
-                    Boundary::Friction(0.3),
-                ][case.walls[2 * a + k]];
-                sim.set_boundary(a, side, wall).unwrap();
+                let wall = [Wall::Free, Wall::Fixed, Wall::Slip, Wall::Friction(0.3)]
+                    [case.walls[2 * a + k]];
+                sim.set_wall(a, side, wall).unwrap();
             }
         }
         let mut g = Vector::<D>::zeros();

@@ -3,7 +3,7 @@
 
 use crate::error::ErrorKind;
 use crate::material::{History, Material};
-use crate::options::{Boundary, FastPaths, Scheme, Shape, Side, Transfer};
+use crate::options::{FastPaths, Scheme, Shape, Side, Transfer, Wall};
 use crate::particles::{Field, Particles};
 use crate::scenes::{run_vibrating_bar, VibratingBar};
 use crate::sim::Sim;
@@ -332,9 +332,9 @@ fn mls_is_refused_without_a_quadratic_or_cubic_bspline_or_with_vc() {
 /// bounces; on a friction floor it decelerates at μ g, as Coulomb's law says.
 #[test]
 fn slip_and_friction_floors() {
-    let run = |floor: Boundary| {
+    let run = |floor: Wall| {
         let mut sim = Sim::<2>::new([0.0, 0.0], [40, 10], 0.05).unwrap();
-        sim.set_boundary(1, Side::Low, floor).unwrap();
+        sim.set_wall(1, Side::Low, floor).unwrap();
         sim.set_gravity([0.0, -10.0]).unwrap();
         let m = sim.add_material(Material::neo_hookean(1000.0, 1e6, 0.3).unwrap());
         let mut x = Vec::new();
@@ -357,13 +357,13 @@ fn slip_and_friction_floors() {
         let mass: f64 = sim.particles().mass.iter().sum();
         (sim.particles().momentum()[0] / mass, sim.time())
     };
-    let (v_slip, _) = run(Boundary::Slip);
+    let (v_slip, _) = run(Wall::Slip);
     assert!(
         (v_slip - 1.0).abs() < 1e-12,
         "slip floor changed tangential velocity: {v_slip}"
     );
     let mu = 0.4;
-    let (v_fric, t) = run(Boundary::Friction(mu));
+    let (v_fric, t) = run(Wall::Friction(mu));
     let expected = 1.0 - mu * 10.0 * t;
     eprintln!("friction: v = {v_fric}, Coulomb {expected}");
     assert!(
@@ -377,7 +377,7 @@ fn slip_and_friction_floors() {
 #[test]
 fn fixed_floor_holds_a_block() {
     let mut sim = Sim::<2>::new([0.0, 0.0], [10, 10], 0.1).unwrap();
-    sim.set_boundary(1, Side::Low, Boundary::Fixed).unwrap();
+    sim.set_wall(1, Side::Low, Wall::Fixed).unwrap();
     sim.set_gravity([0.0, -10.0]).unwrap();
     let m = sim.add_material(Material::neo_hookean(100.0, 1e5, 0.3).unwrap());
     let mut x = Vec::new();
@@ -556,7 +556,7 @@ fn options_are_fixed_after_the_first_step() {
     }
     // Gravity and walls may change between steps.
     sim.set_gravity([0.0, 0.0, -9.81]).unwrap();
-    sim.set_boundary(2, Side::Low, Boundary::Slip).unwrap();
+    sim.set_wall(2, Side::Low, Wall::Slip).unwrap();
     sim.step(dt).unwrap();
 }
 
@@ -833,7 +833,7 @@ fn a_chunk_finished_at_once_gives_the_same_bits_as_one_by_one() {
     use super::grid_to_particle::{Chunk, Finish, ParticleUpdate, CHUNK};
     fn check<const D: usize>() {
         let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [10; D], 0.1).unwrap();
-        sim.set_boundary(0, Side::Low, Boundary::Slip).unwrap();
+        sim.set_wall(0, Side::Low, Wall::Slip).unwrap();
         let rubber = sim.add_material(Material::neo_hookean(1000.0, 1e6, 0.3).unwrap());
         let soil =
             sim.add_material(Material::drucker_prager(1000.0, 1e6, 0.3, 30.0, 0.0, 0.0).unwrap());
@@ -1322,7 +1322,7 @@ fn vc_body_against_the_domain_edge_steps() {
     sim.set_integration(crate::sim::Integration::Vc { order: 1 })
         .unwrap();
     for axis in 0..3 {
-        sim.set_boundary(axis, Side::Low, Boundary::Slip).unwrap();
+        sim.set_wall(axis, Side::Low, Wall::Slip).unwrap();
     }
     let m = sim.add_material(Material::neo_hookean(8930.0, 117e9, 0.35).unwrap());
     let n = 4;
@@ -1398,7 +1398,7 @@ fn sorting_the_particles_changes_only_round_off() {
         !sorted.particles().in_id_order(),
         "the particles were not sorted"
     );
-    assert!(!sorted.work.bins.is_scattered(crate::cpu::Lanes::BASELINE));
+    assert!(!sorted.work.bins.is_scattered(crate::cpu::Lanes::baseline()));
     // Round-off of sums of a few dozen O(1) terms per node, over 20 steps.
     for field in [Field::Position, Field::Velocity, Field::Stress] {
         let (a, b) = (sorted.field(field), unsorted.field(field));

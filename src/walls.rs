@@ -1,4 +1,5 @@
-//! Grid boundary conditions on the faces of the domain.
+//! The walls: boundary conditions of the grid on the faces of the domain (not to be confused
+//! with boundary points, the surface quadrature points of `crate::integration`).
 //!
 //! * `Fixed` and `Slip` walls use the **mirror treatment** (METHOD.md section 7): the ghost layers
 //!   beyond the face hold the mirror image of the body. A ghost node's mass folds onto its mirror
@@ -16,7 +17,7 @@ use crate::error::{check_finite, Error, Result};
 use crate::grid::{DomainBox, Grid, GridNodes};
 use crate::Vector;
 
-pub use crate::options::{Boundary, Side, WallKind, Walls};
+pub use crate::options::{Side, Wall, WallKind, Walls};
 
 impl Side {
     pub fn from_sign(side: i32) -> Result<Side> {
@@ -30,10 +31,10 @@ impl Side {
     }
 }
 
-impl Boundary {
+impl Wall {
     /// Fails for a negative or non-finite friction coefficient.
     pub fn validate(&self) -> Result<()> {
-        if let Boundary::Friction(mu) = *self {
+        if let Wall::Friction(mu) = *self {
             check_finite("friction", mu)?;
             if mu < 0.0 {
                 return Err(Error::invalid(format!("friction must be >= 0, got {mu}")));
@@ -44,14 +45,14 @@ impl Boundary {
 
     /// Whether this wall uses the mirror treatment.
     fn mirrors(&self) -> bool {
-        matches!(self, Boundary::Fixed | Boundary::Slip)
+        matches!(self, Wall::Fixed | Wall::Slip)
     }
 
     /// Mirror sign of velocity component `c` for a wall normal to `axis`.
     fn sign(&self, axis: usize, c: usize) -> f64 {
         match self {
-            Boundary::Fixed => -1.0,
-            Boundary::Slip if c == axis => -1.0,
+            Wall::Fixed => -1.0,
+            Wall::Slip if c == axis => -1.0,
             _ => 1.0,
         }
     }
@@ -100,7 +101,7 @@ impl<const D: usize> Walls<D> {
         Ok(())
     }
 
-    fn mirrored_faces(&self) -> impl Iterator<Item = (usize, Side, Boundary)> + '_ {
+    fn mirrored_faces(&self) -> impl Iterator<Item = (usize, Side, Wall)> + '_ {
         (0..D).flat_map(move |a| {
             [Side::Low, Side::High]
                 .into_iter()
@@ -196,7 +197,7 @@ impl<const D: usize> Walls<D> {
     pub fn clamp_to_walls(&self, domain: &DomainBox<D>, x: &mut Vector<D>) {
         for axis in 0..D {
             for side in [Side::Low, Side::High] {
-                if self.faces[axis][side as usize] == Boundary::Free {
+                if self.faces[axis][side as usize] == Wall::Free {
                     continue;
                 }
                 let c = &mut x[axis];
@@ -210,14 +211,14 @@ impl<const D: usize> Walls<D> {
 
     /// Whether any face is a wall.
     pub fn any_wall(&self) -> bool {
-        self.faces.iter().flatten().any(|b| *b != Boundary::Free)
+        self.faces.iter().flatten().any(|b| *b != Wall::Free)
     }
 
     /// Applies the friction walls to the updated node velocities.
     pub fn apply_friction(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) {
         for axis in 0..D {
             for side in [Side::Low, Side::High] {
-                let Boundary::Friction(mu) = self.faces[axis][side as usize] else {
+                let Wall::Friction(mu) = self.faces[axis][side as usize] else {
                     continue;
                 };
                 let outward = if side == Side::Low { -1.0 } else { 1.0 };
