@@ -424,7 +424,7 @@ fn run_phases<const D: usize, S: StencilView<D>>(
 ) -> Result<()> {
     let mut clock = std::time::Instant::now();
     // Whether to store the particles in block order this step (with the bins' time).
-    let lanes = Lanes::chosen(inputs.fast_paths.vector_instructions);
+    let lanes = inputs.stencils.lanes();
     let scattered = inputs.fast_paths.particle_sorting && inputs.bins.is_scattered(lanes);
     work.times.bins += lap(&mut clock);
     // 2. Body forces (the callback ran before the pool took over), the boundary points and
