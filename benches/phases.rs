@@ -1,11 +1,11 @@
 //! Per-phase micro-benchmarks of the explicit step (criterion), so that a slowdown shows which
 //! phase moved: shape functions (B-spline factors, RK moment solves), binning, particle to grid,
 //! grid update, grid to particle and the VC correction, in 2D and 3D, on the throughput
-//! benchmark's block (`examples/rust/throughput.rs`) after one step.
+//! benchmark's block (`studies/examples/throughput.rs`) after one step.
 //!
 //! ```text
-//! cargo bench --bench phases                 # all (about 2 minutes)
-//! cargo bench --bench phases -- p2g           # a subset (names contain the phase)
+//! cargo bench --features internals --bench phases          # all (about 2 minutes)
+//! cargo bench --features internals --bench phases -- p2g   # a subset (names contain the phase)
 //! ```
 //!
 //! One thread unless `RAYON_NUM_THREADS` says otherwise. Each figure is the time of the phase
@@ -97,8 +97,8 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     // Shape functions.
     let quadratic = BSpline::new(BSplineOrder::Quadratic);
     let mut factors = TensorStencils::<D, 3>::default();
-    // Computed once here too, so that a filtered run (`cargo bench --bench phases -- g2p`) that
-    // skips the shape and bins benchmarks still maps real stencils.
+    // Computed once here too, so that a filtered run (`... --bench phases -- g2p`) that skips
+    // the shape and bins benchmarks still maps real stencils.
     factors.compute(&quadratic, &grid, &ps.position);
     g.bench_function(BenchmarkId::new("shape", "bspline2 factors"), |b| {
         b.iter(|| factors.compute(&quadratic, &grid, &ps.position))

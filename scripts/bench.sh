@@ -8,7 +8,7 @@
 #                               # JIT compilers compile their kernels; results get the suffix -native
 #
 # Makes a venv in build/bench-venv with pinned warp-lang, taichi and numpy from PyPI (CPython 3.11),
-# builds examples/rust/throughput.rs in release (CARGO_TARGET_DIR, default /tmp/bench-target),
+# builds studies/examples/throughput.rs in release (CARGO_TARGET_DIR, default /tmp/bench-target),
 # runs bench/run_matrix.py and bench/skips.py (what each skip saves) and writes build/bench-results[-quick].csv and .md. Timings are noisy
 # when other work runs on the machine: compare ratios within one run.
 set -euo pipefail

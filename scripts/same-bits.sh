@@ -23,7 +23,7 @@ out=$2
 root=$(cd "$(dirname "$0")/.." && pwd)
 rm -rf "$out"
 mkdir -p "$out/scenes"
-python3 - "$root/scenes" "$out/scenes" <<'PY'
+python3 - "$root/runner/scenes" "$out/scenes" <<'PY'
 import re, sys
 src, dst = sys.argv[1], sys.argv[2]
 bar = open(f"{src}/bar.toml").read()

@@ -6,7 +6,7 @@
 #                                                respected, default target/)
 #
 # C blocks:       cc -std=c11 -Wall -Wextra -Werror -pedantic -I include, linked with the static
-#                 library librkmpm.a (cargo build --release --lib) and -lpthread -ldl -lm.
+#                 library librkmpm.a (cargo build --release -p rkmpm-capi) and -lpthread -ldl -lm.
 # Fortran blocks: gfortran -std=f2018 -Wall -Werror against bindings/fortran/rkmpm.f90 (compiled
 #                 here into a temporary directory), linked the same way.
 # Each program runs in a temporary directory of its own (they may write files). A block that is
@@ -40,8 +40,8 @@ failures=0
 
 # ---- rustdoc ------------------------------------------------------------------------------------
 if [[ "${RKMPM_DOC_SKIP_RUSTDOC:-0}" != 1 ]]; then
-  echo "== cargo doc --no-deps --lib (RUSTDOCFLAGS=-D warnings)"
-  if RUSTDOCFLAGS="-D warnings" "$cargo_bin" doc --no-deps --lib --quiet; then
+  echo "== cargo doc --no-deps --lib of the engine, runner and studies (RUSTDOCFLAGS=-D warnings)"
+  if RUSTDOCFLAGS="-D warnings" "$cargo_bin" doc --no-deps --lib -p rkmpm -p rkmpm-runner -p rkmpm-studies --quiet; then
     echo "rustdoc: ok"
   else
     echo "rustdoc: FAILED (warnings above)"
@@ -50,8 +50,8 @@ if [[ "${RKMPM_DOC_SKIP_RUSTDOC:-0}" != 1 ]]; then
 fi
 
 # ---- the library and the Fortran module -----------------------------------------------------------
-echo "== cargo build --release --lib (target dir $target_dir)"
-"$cargo_bin" build --release --lib --quiet
+echo "== cargo build --release -p rkmpm-capi (target dir $target_dir)"
+"$cargo_bin" build --release -p rkmpm-capi --quiet
 lib="$target_dir/release/librkmpm.a"
 [[ -f "$lib" ]] || { echo "missing $lib" >&2; exit 1; }
 libs=("$lib" -lpthread -ldl -lm)

@@ -10,7 +10,7 @@
 #   scripts/test-install.sh [CARGO_TARGET_DIR]
 #
 # The cargo target directory (argument, or $RKMPM_CARGO_TARGET_DIR) lets the build reuse an
-# existing `cargo build --release --lib`; without it cargo builds into build/install-test/rkmpm/cargo.
+# existing `cargo build --release -p rkmpm-capi`; without it cargo builds into build/install-test/rkmpm/cargo.
 # Needs cmake, cc, gfortran, pkg-config and readelf.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -8,8 +8,10 @@
 //! grid to particle → constitutive update → grid reset. USL and MUSL are selectable,
 //! with a PIC/FLIP blend or APIC transfer.
 //!
-//! The C API (`include/rkmpm.h`) is a thin layer over this crate in [`ffi`]. Options are declared
-//! once, in [`options`], for the Rust API, the C API, scene files and checkpoints.
+//! This crate is the engine a Rust program depends on. Its C face (`include/rkmpm.h`,
+//! `librkmpm.a`, `librkmpm.so`) is the crate `rkmpm-capi` in `capi/`, a thin layer over this API;
+//! the `rkmpm` command is `runner/`, the validation studies `studies/`. Options are declared once,
+//! in [`options`], for the Rust API, the C API, scene files and checkpoints.
 //!
 //! ```
 //! use rkmpm::{Sim, Shape, Material};
@@ -31,28 +33,46 @@ pub mod boundary {
     #[deprecated(note = "renamed to `Wall`")]
     pub type Boundary = crate::options::Wall;
 }
-pub mod contact;
-pub mod cpu;
 pub mod error;
-pub mod ffi;
-pub mod grid;
-pub mod integration;
 pub mod io;
 pub mod material;
 pub mod options;
 pub mod particles;
-pub mod scene;
-pub mod scenes;
-pub mod shape;
 pub mod sim;
-pub mod step;
-pub mod verification;
+
+/// The engine's internals: private, or public with the feature `internals` (for the per-phase
+/// benchmarks, which call the phases one by one). Not part of the supported API.
+macro_rules! internal_modules {
+    ($($(#[$doc:meta])* $name:ident;)*) => {$(
+        $(#[$doc])*
+        #[cfg(feature = "internals")]
+        pub mod $name;
+        $(#[$doc])*
+        #[cfg(not(feature = "internals"))]
+        pub(crate) mod $name;
+    )*};
+}
+internal_modules! {
+    /// Multi-velocity-field contact between bodies.
+    contact;
+    /// The instruction set the loops use.
+    cpu;
+    /// The background grid, its blocks and node storage.
+    grid;
+    /// VC integration and the boundary points.
+    integration;
+    /// Shape functions and their stencils.
+    shape;
+    /// The step's phases.
+    step;
+}
 
 pub use error::{Error, ErrorKind, Result};
 pub use grid::Grid;
+pub use integration::BoundaryPoints;
 pub use material::Material;
 pub use particles::{Field, Particles};
-pub use shape::Shape;
+pub use shape::{Shape, UniformRng};
 pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer};
 pub use walls::{Side, Wall};
 

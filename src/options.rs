@@ -4,9 +4,9 @@
 //! and a parameter-free *kind* (`ShapeKind`): a `#[repr(u32)]` enum whose discriminants are the
 //! codes of the C API (`RKMPM_SHAPE_*`) and of checkpoint files, and whose serde names are the
 //! spellings of scene files (`shape = "bspline2"`). `TryFrom<u32>` turns a code into a kind and
-//! refuses unknown codes; `kind()` and `from_kind` go between a kind and its option. The C
-//! constants in `ffi` and the Fortran module spell the same codes for their users; tests check
-//! both against these kinds.
+//! refuses unknown codes; `kind()` and `from_kind` go between a kind and its option. The
+//! constants of the C API (`capi/`) and of the Fortran module spell the same codes for their
+//! users; tests check both against these kinds.
 //!
 //! This module imports nothing else of the engine, so every module can import it.
 

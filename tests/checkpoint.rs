@@ -2,9 +2,9 @@
 //! data bit for bit as the uninterrupted run; damaged files are refused; a failed save leaves
 //! the previous checkpoint as it was.
 
-use rkmpm::scenes::{colliding_disks, GranularColumn, Penetration, TaylorBar};
 use rkmpm::walls::{Side, Wall};
 use rkmpm::{ErrorKind, Integration, Material, Shape, Sim, Transfer, Vector};
+use rkmpm_studies::scenes::{colliding_disks, GranularColumn, Penetration, TaylorBar};
 use std::path::PathBuf;
 
 fn scratch(name: &str) -> PathBuf {

@@ -308,7 +308,7 @@ fn particles_packed_against_a_wall() {
 /// period: APIC's dissipation). A growth beyond the swing, or a loss beyond 30%, fails.
 #[test]
 fn a_hundred_thousand_steps_of_an_elastic_body() {
-    let bar = rkmpm::scenes::VibratingBar {
+    let bar = rkmpm_studies::scenes::VibratingBar {
         cells_along: 16,
         ..Default::default()
     };

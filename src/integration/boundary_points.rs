@@ -755,11 +755,24 @@ mod tests {
     /// enclosing the box, in 2D and 3D.
     fn jittered_body_fills_the_box<const D: usize>(cells: usize, seed: u64) {
         let s = 0.5 / cells as f64;
-        let placement = crate::verification::Placement::Jittered {
-            fraction: 0.3,
-            seed,
-        };
-        let (x, _) = placement.particles::<D>(cells, 2, 2.0 * s).unwrap();
+        // Two particles per cell and direction at the quarter points, each moved by up to 30 %
+        // of their spacing `s` along every axis.
+        let n = 2 * cells;
+        let mut rng = crate::shape::UniformRng::new(seed);
+        let x: Vec<Vector<D>> = (0..n.pow(D as u32))
+            .map(|k| {
+                let mut r = k;
+                let mut site = Vector::<D>::from_fn(|_, _| {
+                    let i = r % n;
+                    r /= n;
+                    (i as f64 + 0.5) * s
+                });
+                for a in 0..D {
+                    site[a] += (2.0 * rng.uniform() - 1.0) * 0.3 * s;
+                }
+                site
+            })
+            .collect();
         let (pts, na) = BoundaryPoints::of_particles(
             (&Vector::zeros(), &Vector::from_element(1.0)),
             2.0 * s,

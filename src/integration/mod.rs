@@ -601,19 +601,15 @@ impl<const D: usize> VcCorrection<D> {
         }
     }
 
-    /// Conjugate-gradient iterations of the last [`VcCorrection::compute`].
-    pub fn iterations(&self) -> usize {
-        self.iterations
-    }
-
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.
+    #[cfg(test)]
     pub fn reduced_to_first_order(&self, nodes: &GridNodes<D>, n: usize) -> bool {
         self.reduced.get(nodes.slot(n)).copied().unwrap_or(false)
     }
 
     /// The correction `ζ_I·Q_I(x_p) − μ_p` to add to `∇Ψ_I(x_p)` for the node `n` (already
     /// active, in the support of particle `p` at `x`).
-    #[inline]
+    #[cfg(test)]
     pub fn gradient_correction(
         &self,
         grid: &Grid<D>,

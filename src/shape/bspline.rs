@@ -31,45 +31,6 @@ impl BSplineOrder {
             BSplineOrder::Cubic => crate::floor_index(xi) - 1,
         }
     }
-
-    /// Kernel value and derivative at signed distance `d` (in cell units) from a node.
-    #[inline]
-    pub fn kernel(self, d: f64) -> (f64, f64) {
-        let r = d.abs();
-        let s = d.signum();
-        match self {
-            BSplineOrder::Linear => {
-                if r < 1.0 {
-                    (1.0 - r, -s)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-            BSplineOrder::Quadratic => {
-                if r < 0.5 {
-                    (0.75 - r * r, -2.0 * d)
-                } else if r < 1.5 {
-                    let t = 1.5 - r;
-                    (0.5 * t * t, -s * t)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-            BSplineOrder::Cubic => {
-                if r < 1.0 {
-                    (
-                        0.5 * r * r * r - r * r + 2.0 / 3.0,
-                        s * (1.5 * r * r - 2.0 * r),
-                    )
-                } else if r < 2.0 {
-                    let t = 2.0 - r;
-                    (t * t * t / 6.0, -s * 0.5 * t * t)
-                } else {
-                    (0.0, 0.0)
-                }
-            }
-        }
-    }
 }
 
 /// The 1D factors of a tensor-product B-spline at one point: the stencil's first node and, per

@@ -12,7 +12,9 @@ mod stencil;
 
 pub use bspline::{BSpline, BSplineOrder};
 pub use monomials::Monomials;
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use stencil::{
     Gathered, ScatterInput, StencilNode, StencilView, Stencils, TensorStencils, TensorView,
 };
@@ -21,6 +23,7 @@ use crate::error::Result;
 use crate::grid::{Bins, Grid};
 use crate::Vector;
 
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use crate::options::{Shape, ShapeKind};
 
 impl Shape {

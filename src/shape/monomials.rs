@@ -30,6 +30,7 @@ impl<const D: usize> Monomials<D> {
         self.exponents.len()
     }
 
+    #[cfg_attr(not(feature = "internals"), allow(dead_code))] // clippy's len_without_is_empty
     pub fn is_empty(&self) -> bool {
         self.exponents.is_empty()
     }

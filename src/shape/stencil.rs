@@ -399,6 +399,7 @@ impl<const D: usize, const W: usize> Default for TensorStencils<D, W> {
 
 impl<const D: usize, const W: usize> TensorStencils<D, W> {
     /// Evaluates the factors of `shape` (whose width must be `W`) at every position.
+    #[cfg(any(test, feature = "internals"))]
     pub fn compute(&mut self, shape: &BSpline, grid: &Grid<D>, x: &[Vector<D>]) {
         self.compute_with(shape, grid, x, true, &BlockLayout::new(W, grid));
     }

@@ -195,8 +195,8 @@ impl<const D: usize> Sim<D> {
     }
 
     /// Turns on contact between bodies (every material is a body with its own velocity field;
-    /// see [`crate::contact`]) with Coulomb friction `friction ≥ 0`, or off with `None`. Before
-    /// stepping only; not with given boundary points or MUSL. With VC each deformable body gets
+    /// Bardenhagen et al. 2000, docs/DESIGN.md) with Coulomb friction `friction ≥ 0`, or off
+    /// with `None`. Before stepping only; not with given boundary points or MUSL. With VC each deformable body gets
     /// its own correction, over its own particles and the surface found from them.
     pub fn set_contact(&mut self, friction: Option<f64>) -> Result<()> {
         self.before_stepping("contact")?;

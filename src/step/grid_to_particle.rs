@@ -326,6 +326,7 @@ impl Chunk<'_> {
 }
 
 /// The type of a missing `finish` of [`grid_to_particle`] (`None::<&NoFinish>`).
+#[cfg_attr(not(feature = "internals"), allow(dead_code))] // for the benchmarks
 pub struct NoFinish;
 
 impl<const D: usize> Finish<D> for NoFinish {

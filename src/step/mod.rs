@@ -49,6 +49,7 @@ pub(crate) use profile::lap;
 pub use profile::{MemoryUse, PhaseTimes};
 
 pub use crate::grid::{Bins, BlockLayout};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use grid_to_particle::{
     grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, NewState,
     NewStateWriter, NoFinish, ParticleUpdate,

@@ -1,0 +1,5 @@
+//! The `rkmpm` command's parts: scene files (TOML in, a ready simulation out) and the PNG
+//! snapshots of a run's particles. The command itself is `src/main.rs`.
+
+pub mod scene;
+pub mod snapshot;

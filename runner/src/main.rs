@@ -1,0 +1,494 @@
+//! `rkmpm`: the command-line runner. Runs a scene file (or a bundled scene) end to end with a
+//! progress bar, writes VTK frames for ParaView and prints a summary. `rkmpm --help` explains
+//! every option.
+
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use rkmpm::io::vtk::VtkSeries;
+use rkmpm::Sim;
+use rkmpm_runner::scene::{Scene, SceneSim, BUNDLED};
+use rkmpm_studies::scenes::{run_vibrating_bar, VibratingBar};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "rkmpm",
+    version,
+    about = "Run Material Point Method scenes (RK shape functions, VC integration) and write ParaView output",
+    long_about = "Run Material Point Method scenes and write ParaView output.\n\n\
+        Without a command, `rkmpm [SCENE] [OPTIONS]` is `rkmpm run [SCENE] [OPTIONS]`, and with \
+        no scene it runs the default one (two elastic disks collide). A scene is a TOML file (docs/SCENES.md lists every key) or the \
+        name of a bundled scene (`rkmpm list`).",
+    after_help = "Examples:\n  rkmpm                                  run the default scene into out/\n  \
+        rkmpm run runner/scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80 --png damage\n  \
+        rkmpm check my_scene.toml               read and build a scene without running it\n  \
+        rkmpm list                              the bundled scenes"
+)]
+#[command(args_conflicts_with_subcommands = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    /// Without a command: the options of `run`.
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene: build it, step it to its end time with adaptive steps, write VTK frames
+    /// (<out>/<output>_NNNNN.vtu and <out>/<output>.pvd) and print a summary.
+    Run(RunArgs),
+    /// Read and build a scene without stepping it; print what it holds.
+    Check {
+        /// A scene file (.toml) or the name of a bundled scene.
+        scene: String,
+    },
+    /// List the bundled scenes.
+    List,
+    /// Print a bundled scene's TOML, to start a scene file of your own.
+    Show {
+        /// The name of a bundled scene.
+        name: String,
+    },
+    /// Run the vibrating bar against its exact solution and print the errors.
+    Verify {
+        /// `bar2d` or `bar3d`.
+        #[arg(value_parser = ["bar2d", "bar3d"])]
+        problem: String,
+        /// Directory for the final VTK frame.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// A scene file (.toml) or the name of a bundled scene [default: disks].
+    scene: Option<String>,
+    /// Directory for the VTK frames and the .pvd series (created if missing).
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Overrides the scene's run.end_time (seconds of simulated time).
+    #[arg(long)]
+    end_time: Option<f64>,
+    /// Overrides the scene's run.frames (VTK frames over the run; 0 writes none).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
+    #[arg(long)]
+    cfl: Option<f64>,
+    /// Overrides the scene's run.png: at the end, write <out>/<output>.png, the particles
+    /// coloured by this field (velocity, displacement, stress, pressure, volume, mass,
+    /// deformation_gradient, plastic_strain, damage, material); `none` writes no picture.
+    #[arg(long, value_name = "FIELD")]
+    png: Option<String>,
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar, only the summary.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command.unwrap_or(Command::Run(cli.run)) {
+        Command::Run(args) => run(args),
+        Command::Check { scene } => check(&scene),
+        Command::List => {
+            for (name, text) in BUNDLED {
+                let title = Scene::from_toml(text, name)
+                    .map(|s| s.title)
+                    .unwrap_or_default();
+                println!("{name:<12} {title}");
+            }
+            Ok(())
+        }
+        Command::Show { name } => match BUNDLED.iter().find(|(n, _)| *n == name) {
+            Some((_, text)) => {
+                print!("{text}");
+                Ok(())
+            }
+            None => Err(format!("no bundled scene {name:?} (rkmpm list)")),
+        },
+        Command::Verify { problem, out } => std::fs::create_dir_all(&out)
+            .map_err(|e| format!("cannot create {}: {e}", out.display()))
+            .and_then(|_| match problem.as_str() {
+                "bar2d" => bar::<2>(&out),
+                _ => bar::<3>(&out),
+            }),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// A scene from a file path or a bundled name.
+fn load(scene: &str) -> Result<Scene, String> {
+    if let Some((name, text)) = BUNDLED.iter().find(|(n, _)| *n == scene) {
+        return Scene::from_toml(text, &format!("bundled scene {name}")).map_err(|e| e.message);
+    }
+    if !Path::new(scene).exists() {
+        let names: Vec<&str> = BUNDLED.iter().map(|(n, _)| *n).collect();
+        return Err(format!(
+            "{scene}: no such file, and not a bundled scene ({})",
+            names.join(", ")
+        ));
+    }
+    Scene::load(scene).map_err(|e| e.message)
+}
+
+fn check(scene: &str) -> Result<(), String> {
+    let s = load(scene)?;
+    let (sim, other) = validate(&s)?;
+    match &sim {
+        SceneSim::D2(m) => describe(&s, m),
+        SceneSim::D3(m) => describe(&s, m),
+    }
+    if let Some((other, sim)) = &other {
+        println!("compared with the [compare] options:");
+        match sim {
+            SceneSim::D2(m) => describe(other, m),
+            SceneSim::D3(m) => describe(other, m),
+        }
+    }
+    println!("ok");
+    Ok(())
+}
+
+/// What `check` and `run` both do before anything is computed: builds the scene (and its
+/// comparison), and refuses what a run would refuse (combinations of options the step does
+/// not support, a picture of a field that does not exist).
+fn validate(scene: &Scene) -> Result<(SceneSim, Option<(Scene, SceneSim)>), String> {
+    if let Some(p) = &scene.run.png {
+        if !rkmpm_runner::snapshot::FIELDS.contains(&p.as_str()) {
+            return Err(format!(
+                "png = {p:?}: choose one of {}",
+                rkmpm_runner::snapshot::FIELDS.join(", ")
+            ));
+        }
+    }
+    let checked = |s: &Scene, what: &str| -> Result<SceneSim, String> {
+        let sim = s.build().map_err(|e| format!("{what}{}", e.message))?;
+        match &sim {
+            SceneSim::D2(m) => m.check_options(),
+            SceneSim::D3(m) => m.check_options(),
+        }
+        .map_err(|e| format!("{what}{}", e.message))?;
+        Ok(sim)
+    };
+    let sim = checked(scene, "")?;
+    // The comparison run, if the scene has one, writes no frames: its picture is the point.
+    let other = scene
+        .comparison()
+        .map(|mut other| {
+            other.run.frames = 0;
+            checked(&other, "[compare]: ").map(|sim| (other, sim))
+        })
+        .transpose()?;
+    match (&sim, &other) {
+        (SceneSim::D2(_), Some((_, SceneSim::D3(_))))
+        | (SceneSim::D3(_), Some((_, SceneSim::D2(_)))) => {
+            Err("[compare] gave a scene of another dimension".into())
+        }
+        _ => Ok((sim, other)),
+    }
+}
+
+fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
+    let g = sim.grid();
+    let o = sim.options();
+    println!("scene: {}", scene.title);
+    println!(
+        "{D}D, grid {} cells of {:e} m, {} particles, {} material{}; {}, {:?}",
+        g.cells
+            .iter()
+            .map(|c| c.to_string())
+            .collect::<Vec<_>>()
+            .join(" x "),
+        g.cell_size,
+        sim.particles().len(),
+        sim.materials().len(),
+        if sim.materials().len() == 1 { "" } else { "s" },
+        method(sim),
+        o.scheme
+    );
+}
+
+fn run(args: RunArgs) -> Result<(), String> {
+    let name = args.scene.clone().unwrap_or_else(|| "disks".into());
+    let mut scene = load(&name)?;
+    if let Some(t) = args.end_time {
+        scene.run.end_time = t;
+    }
+    if let Some(f) = args.frames {
+        scene.run.frames = f;
+    }
+    if let Some(c) = args.cfl {
+        scene.run.cfl = c;
+    }
+    if let Some(p) = &args.png {
+        scene.run.png = (p != "none").then(|| p.clone());
+    }
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| format!("--threads {n}: {e}"))?;
+    }
+    let built = validate(&scene)?;
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
+    match built {
+        (SceneSim::D2(mut sim), None) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D3(mut sim), None) => run_scenes(&scene, &mut sim, None, &args),
+        (SceneSim::D2(mut sim), Some((c, SceneSim::D2(mut o)))) => {
+            run_scenes(&scene, &mut sim, Some((&c, &mut o)), &args)
+        }
+        (SceneSim::D3(mut sim), Some((c, SceneSim::D3(mut o)))) => {
+            run_scenes(&scene, &mut sim, Some((&c, &mut o)), &args)
+        }
+        _ => unreachable!("validate refuses a comparison of another dimension"),
+    }
+}
+
+/// Runs the scene, then its comparison if it has one, and writes the picture: one panel, or
+/// the two runs side by side on one colour scale.
+fn run_scenes<const D: usize>(
+    scene: &Scene,
+    sim: &mut Sim<D>,
+    other: Option<(&Scene, &mut Sim<D>)>,
+    args: &RunArgs,
+) -> Result<(), String> {
+    run_scene(scene, sim, args)?;
+    let other = match other {
+        Some((s, o)) => {
+            println!("\ncompared with the [compare] options:");
+            run_scene(s, o, args)?;
+            Some(o)
+        }
+        None => None,
+    };
+    if let Some(field) = &scene.run.png {
+        let path = args.out.join(format!("{}.png", scene.run.output));
+        let mut runs = vec![(&*sim, method(sim))];
+        if let Some(o) = &other {
+            runs.push((&**o, method(o)));
+        }
+        rkmpm_runner::snapshot::write_panels(&runs, field, &scene.title, &path)?;
+        println!("picture: {} (coloured by {field})", path.display());
+    }
+    Ok(())
+}
+
+/// The method of a run in a mechanician's words: shape functions, integration, transfer.
+fn method<const D: usize>(sim: &Sim<D>) -> String {
+    let o = sim.options();
+    let shape = match o.shape {
+        rkmpm::Shape::Linear => "linear hats".to_string(),
+        rkmpm::Shape::BSpline2 => "quadratic B-spline".to_string(),
+        rkmpm::Shape::BSpline3 => "cubic B-spline".to_string(),
+        rkmpm::Shape::Rk { order, support } => format!("RK order {order}, support {support}"),
+    };
+    let integration = match o.integration {
+        rkmpm::Integration::MaterialPoint => "material points".to_string(),
+        rkmpm::Integration::Vc { order } => format!("VC order {order}"),
+    };
+    let transfer = match o.transfer {
+        rkmpm::Transfer::Apic => "APIC".to_string(),
+        rkmpm::Transfer::PicFlip { flip } => format!("PIC/FLIP {flip}"),
+        rkmpm::Transfer::Mls => "MLS".to_string(),
+    };
+    format!("{shape}, {integration}, {transfer}")
+}
+
+/// Steps to the end time in chunks of adaptive steps, writing frames and updating the bar.
+fn run_scene<const D: usize>(
+    scene: &Scene,
+    sim: &mut Sim<D>,
+    args: &RunArgs,
+) -> Result<(), String> {
+    describe(scene, sim);
+    let run = &scene.run;
+    let end = run.end_time;
+    let mut series = VtkSeries::new(args.out.join(&run.output));
+    // Progress is updated once per chunk; a frame is written every `per_frame` chunks.
+    let per_frame = if run.frames == 0 {
+        1
+    } else {
+        100usize.div_ceil(run.frames)
+    };
+    let chunks = if run.frames == 0 {
+        100
+    } else {
+        run.frames * per_frame
+    };
+    let interactive = !args.quiet && std::io::stderr().is_terminal();
+    let bar = if interactive {
+        let bar = ProgressBar::new(chunks as u64);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30.cyan/blue} {percent:>3}%  {msg}  [{elapsed_precise} elapsed, {eta_precise} left]",
+            )
+            .expect("a valid template"),
+        );
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let p0 = sim.particles().momentum();
+    let e0 = sim.particles().kinetic_energy() + sim.strain_energy();
+    let n = sim.particles().len() as f64;
+    let start = Instant::now();
+    let frame = |series: &mut VtkSeries, sim: &Sim<D>| {
+        series
+            .write_frame(sim)
+            .map_err(|e| format!("writing a frame: {}", e.message))
+    };
+    if run.frames > 0 {
+        frame(&mut series, sim)?;
+    }
+    for k in 1..=chunks {
+        let target = end * k as f64 / chunks as f64;
+        if target > sim.time() {
+            sim.advance(target - sim.time(), run.cfl).map_err(|e| {
+                bar.abandon();
+                format!(
+                    "the run stopped after step {} at t = {:e} s (end time {end:e} s): {}",
+                    sim.steps(),
+                    sim.time(),
+                    e.message
+                )
+            })?;
+        }
+        let wall = start.elapsed().as_secs_f64();
+        let rate = n * sim.steps() as f64 / wall.max(1e-9);
+        bar.set_message(format!(
+            "step {}  t = {:.4e} of {:.4e} s  {:.2e} particle-steps/s",
+            sim.steps(),
+            sim.time(),
+            end,
+            rate
+        ));
+        bar.set_position(k as u64);
+        if run.frames > 0 && k % per_frame == 0 {
+            frame(&mut series, sim)?;
+            if !interactive && !args.quiet {
+                println!(
+                    "frame {:>3}/{}  step {:>6}  t = {:.4e} s  {:.2e} particle-steps/s",
+                    k / per_frame,
+                    run.frames,
+                    sim.steps(),
+                    sim.time(),
+                    rate
+                );
+            }
+        }
+    }
+    bar.finish_and_clear();
+    summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
+    Ok(())
+}
+
+fn summary<const D: usize>(
+    sim: &Sim<D>,
+    p0: rkmpm::Vector<D>,
+    e0: f64,
+    wall: f64,
+    series: &VtkSeries,
+) {
+    let ps = sim.particles();
+    let p1 = ps.momentum();
+    let e1 = ps.kinetic_energy() + sim.strain_energy();
+    let fmt = |v: &rkmpm::Vector<D>| {
+        v.iter()
+            .map(|c| format!("{c:.4e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "steps: {}, simulated time: {:.4e} s, wall time: {:.2} s, {:.2e} particle-steps/s",
+        sim.steps(),
+        sim.time(),
+        wall,
+        ps.len() as f64 * sim.steps() as f64 / wall.max(1e-9)
+    );
+    println!("momentum: start ({}), end ({})", fmt(&p0), fmt(&p1));
+    println!(
+        "energy: kinetic + stored {e0:.4e} at the start, {:.4e} + {:.4e} = {e1:.4e} at the end",
+        ps.kinetic_energy(),
+        sim.strain_energy()
+    );
+    let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+    if !ps.history.is_empty() {
+        let plastic: Vec<f64> = ps.history.iter().map(|s| s.plastic_strain).collect();
+        // Damage only where a material has it (Johnson–Cook), not for soil.
+        let damages = sim
+            .materials()
+            .iter()
+            .any(|m| matches!(m, rkmpm::material::Material::JohnsonCook(_)));
+        if damages {
+            let damage: Vec<f64> = ps.history.iter().map(|s| s.damage).collect();
+            println!(
+                "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
+                largest(&plastic),
+                largest(&damage),
+                damage.iter().filter(|&&d| d >= 1.0).count()
+            );
+        } else {
+            println!("largest plastic strain {:.3}", largest(&plastic));
+        }
+    }
+    println!(
+        "largest pressure at the end: {:.4e} Pa",
+        ps.pressure
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+    );
+    if series.frames() > 0 {
+        println!(
+            "output: {} frames, open {}.pvd in ParaView",
+            series.frames(),
+            series.prefix().display()
+        );
+    }
+}
+
+fn bar<const D: usize>(out: &Path) -> Result<(), String> {
+    let bar = VibratingBar::default();
+    let mut sim = bar.build::<D>().map_err(|e| e.to_string())?;
+    println!(
+        "scene: axial vibrating bar in {D}D, {} particles, {} cells along the bar",
+        sim.particles().len(),
+        bar.cells_along
+    );
+    let start = Instant::now();
+    let r = run_vibrating_bar(&bar, &mut sim, 0.2).map_err(|e| e.to_string())?;
+    let mut series = VtkSeries::new(out.join(format!("bar{D}d")));
+    series.write_frame(&sim).map_err(|e| e.to_string())?;
+    println!(
+        "steps: {}, wall time {:.2} s",
+        r.steps,
+        start.elapsed().as_secs_f64()
+    );
+    println!(
+        "period: {:.6} s (exact {:.6} s, error {:.3}%)",
+        r.period,
+        r.exact_period,
+        100.0 * (r.period - r.exact_period).abs() / r.exact_period
+    );
+    println!(
+        "mean-velocity history: largest error {:.3}% of the amplitude",
+        100.0 * r.velocity_error
+    );
+    println!("output: {}.pvd", series.prefix().display());
+    Ok(())
+}

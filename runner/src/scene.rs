@@ -1,0 +1,767 @@
+//! Scene files: a whole simulation (grid, options, walls, materials, bodies, run length and
+//! output) described in TOML, read with serde. Unknown or misspelt keys, missing ones and values
+//! of the wrong type are refused with the line, the column and the field
+//! (`scene.toml: line 12, column 1: unknown field `densty` ...`); values the engine refuses are
+//! reported with the table they came from (`materials[1] "steel": young must be positive`).
+//!
+//! ```toml
+//! title = "two elastic disks collide"
+//! [grid]
+//! origin = [0.0, 0.0]          # its length is the dimension (2 or 3)
+//! cells = [40, 40]
+//! cell_size = 0.025
+//! [options]                    # all optional; these are the defaults
+//! shape = "bspline2"           # linear | bspline2 | bspline3 | rk (with rk_order, rk_support)
+//! transfer = "apic"            # apic | pic_flip (with flip) | mls
+//! [[materials]]
+//! name = "rubber"
+//! model = "neo_hookean"        # linear_elastic | neo_hookean | drucker_prager | johnson_cook | rigid
+//! density = 1000.0
+//! young = 1000.0
+//! poisson = 0.3
+//! [[bodies]]
+//! material = "rubber"
+//! sphere = { center = [0.25, 0.25], radius = 0.2 }   # or box, cylinder, file
+//! velocity = [0.1, 0.1]
+//! [run]
+//! end_time = 3.0
+//! frames = 30
+//! ```
+//!
+//! `docs/SCENES.md` lists every key.
+
+use rkmpm::error::{Error, ErrorKind, Result};
+use rkmpm::material::{JohnsonCookParameters, Material, MieGruneisen};
+use rkmpm::options::{
+    Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind, Wall,
+    WallKind,
+};
+use rkmpm::sim::Sim;
+use rkmpm::Vector;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A whole scene as read from a file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// What the scene is, printed by the runner.
+    #[serde(default)]
+    pub title: String,
+    pub grid: GridSpec,
+    #[serde(default)]
+    pub options: OptionsSpec,
+    #[serde(default)]
+    pub walls: Vec<WallSpec>,
+    pub materials: Vec<MaterialSpec>,
+    pub bodies: Vec<BodySpec>,
+    pub run: RunSpec,
+    /// The same scene once more with these options instead of `[options]` (keys and defaults
+    /// as there): the runner's picture then shows both runs side by side on one colour scale.
+    #[serde(default)]
+    pub compare: Option<OptionsSpec>,
+    /// Directory of the scene file: relative particle files are found from it.
+    #[serde(skip)]
+    pub base: PathBuf,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    /// Lower corner; its length (2 or 3) is the dimension of the scene.
+    pub origin: Vec<f64>,
+    pub cells: Vec<usize>,
+    pub cell_size: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OptionsSpec {
+    #[serde(default)]
+    pub shape: ShapeKind,
+    #[serde(default = "one")]
+    pub rk_order: u32,
+    #[serde(default = "two")]
+    pub rk_support: f64,
+    #[serde(default)]
+    pub integration: IntegrationKind,
+    #[serde(default = "one")]
+    pub vc_order: u32,
+    #[serde(default)]
+    pub transfer: TransferKind,
+    /// FLIP fraction of the PIC/FLIP blend.
+    #[serde(default)]
+    pub flip: f64,
+    #[serde(default)]
+    pub scheme: Scheme,
+    #[serde(default)]
+    pub gravity: Option<Vec<f64>>,
+    /// Multi-velocity-field contact between materials, with this Coulomb friction.
+    #[serde(default)]
+    pub contact_friction: Option<f64>,
+}
+
+impl Default for OptionsSpec {
+    fn default() -> Self {
+        OptionsSpec {
+            shape: ShapeKind::default(),
+            rk_order: 1,
+            rk_support: 2.0,
+            integration: IntegrationKind::default(),
+            vc_order: 1,
+            transfer: TransferKind::default(),
+            flip: 0.0,
+            scheme: Scheme::default(),
+            gravity: None,
+            contact_friction: None,
+        }
+    }
+}
+
+fn one() -> u32 {
+    1
+}
+fn two() -> f64 {
+    2.0
+}
+fn default_cfl() -> f64 {
+    0.3
+}
+fn default_ppc() -> usize {
+    2
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallSpec {
+    /// 0, 1 or 2 (x, y, z).
+    pub axis: usize,
+    pub side: Side,
+    pub kind: WallKind,
+    /// Coulomb coefficient of a `friction` wall.
+    #[serde(default)]
+    pub friction: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Model {
+    LinearElastic,
+    NeoHookean,
+    DruckerPrager,
+    JohnsonCook,
+    Rigid,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// The name bodies refer to.
+    pub name: String,
+    pub model: Model,
+    pub density: f64,
+    #[serde(default)]
+    pub young: Option<f64>,
+    #[serde(default)]
+    pub poisson: Option<f64>,
+    /// Drucker–Prager: friction angle (degrees), cohesion (Pa), dilatancy angle (degrees).
+    #[serde(default)]
+    pub friction_angle: Option<f64>,
+    #[serde(default)]
+    pub cohesion: Option<f64>,
+    #[serde(default)]
+    pub dilatancy_angle: Option<f64>,
+    /// Johnson–Cook constants (see `RkmpmJohnsonCook` in the header).
+    #[serde(default)]
+    pub johnson_cook: Option<JohnsonCookSpec>,
+    /// Rigid: the prescribed velocity.
+    #[serde(default)]
+    pub velocity: Option<Vec<f64>>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JohnsonCookSpec {
+    pub a: f64,
+    pub b: f64,
+    pub n: f64,
+    #[serde(default)]
+    pub c: f64,
+    #[serde(default = "unit")]
+    pub reference_strain_rate: f64,
+    #[serde(default = "unit")]
+    pub m: f64,
+    #[serde(default = "room")]
+    pub room_temperature: f64,
+    pub melt_temperature: f64,
+    pub specific_heat: f64,
+    #[serde(default)]
+    pub taylor_quinney: f64,
+    /// D1..D5 of Johnson–Cook damage; no damage when absent.
+    #[serde(default)]
+    pub damage: Option<[f64; 5]>,
+    /// Mie–Grüneisen: bulk sound speed (m/s), Hugoniot slope, Grüneisen gamma.
+    #[serde(default)]
+    pub mie_gruneisen: Option<[f64; 3]>,
+}
+
+fn unit() -> f64 {
+    1.0
+}
+fn room() -> f64 {
+    293.0
+}
+
+/// Where a body's particles are: one of `box`, `sphere`, `cylinder` or `file`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    pub material: String,
+    #[serde(default, rename = "box")]
+    pub boxed: Option<BoxSpec>,
+    #[serde(default)]
+    pub sphere: Option<SphereSpec>,
+    #[serde(default)]
+    pub cylinder: Option<CylinderSpec>,
+    /// A text file of particles, one per line: `x y [z] volume [vx vy [vz]]` (spaces or
+    /// commas; `#` starts a comment).
+    #[serde(default)]
+    pub file: Option<PathBuf>,
+    /// Particles per cell and direction for the shapes (on the lattice `origin + (i + ½) h/n`).
+    #[serde(default = "default_ppc")]
+    pub particles_per_cell: usize,
+    #[serde(default)]
+    pub velocity: Option<Vec<f64>>,
+    /// A velocity field `amplitude · sin(wavenumber · x[along])` (a vibration mode), added to
+    /// `velocity`.
+    #[serde(default)]
+    pub sine_velocity: Option<SineVelocity>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SineVelocity {
+    pub amplitude: Vec<f64>,
+    pub along: usize,
+    pub wavenumber: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoxSpec {
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereSpec {
+    pub center: Vec<f64>,
+    pub radius: f64,
+}
+
+/// A cylinder (a rectangle in 2D) along `axis` from `base` over `length`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CylinderSpec {
+    pub base: Vec<f64>,
+    pub axis: usize,
+    pub radius: f64,
+    pub length: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    pub end_time: f64,
+    #[serde(default = "default_cfl")]
+    pub cfl: f64,
+    /// VTK frames written evenly over the run (plus the first); 0 writes none.
+    #[serde(default)]
+    pub frames: usize,
+    /// Output prefix: `<output>_00000.vtu` ... and `<output>.pvd` (relative to the runner's
+    /// output directory).
+    #[serde(default = "default_output")]
+    pub output: String,
+    /// At the end, a PNG of the particles coloured by this field (`<output>.png`).
+    #[serde(default)]
+    pub png: Option<String>,
+}
+
+fn default_output() -> String {
+    "scene".into()
+}
+
+/// A scene's simulation, 2D or 3D.
+pub enum SceneSim {
+    D2(Sim<2>),
+    D3(Sim<3>),
+}
+
+impl Scene {
+    /// Reads a scene from TOML text; `name` is used in messages (usually the file name).
+    pub fn from_toml(text: &str, name: &str) -> Result<Self> {
+        toml::from_str::<Scene>(text).map_err(|e| {
+            let place = match e.span() {
+                Some(span) => {
+                    let line = text[..span.start].matches('\n').count() + 1;
+                    let column =
+                        span.start - text[..span.start].rfind('\n').map_or(0, |k| k + 1) + 1;
+                    let here = text.lines().nth(line - 1).unwrap_or("").trim();
+                    format!("line {line}, column {column} (`{here}`): ")
+                }
+                None => String::new(),
+            };
+            Error::invalid(format!("{name}: {place}{}", e.message()))
+        })
+    }
+
+    /// Reads a scene file; particle files are found relative to its directory.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            Error::new(
+                ErrorKind::Io,
+                format!("cannot read {}: {e}", path.display()),
+            )
+        })?;
+        let mut scene = Self::from_toml(&text, &path.display().to_string())?;
+        scene.base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        Ok(scene)
+    }
+
+    /// The dimension, from the grid's origin.
+    pub fn dim(&self) -> Result<usize> {
+        match self.grid.origin.len() {
+            d @ (2 | 3) => Ok(d),
+            d => Err(Error::invalid(format!(
+                "grid.origin has {d} components: give 2 (2D) or 3 (3D)"
+            ))),
+        }
+    }
+
+    /// The scene to compare with: this one with the `[compare]` options, if it has them.
+    pub fn comparison(&self) -> Option<Scene> {
+        self.compare.as_ref().map(|options| Scene {
+            options: options.clone(),
+            compare: None,
+            ..self.clone()
+        })
+    }
+
+    /// Builds the simulation: grid, options, walls, materials, then the bodies' particles.
+    pub fn build(&self) -> Result<SceneSim> {
+        Ok(match self.dim()? {
+            2 => SceneSim::D2(self.build_dim::<2>()?),
+            _ => SceneSim::D3(self.build_dim::<3>()?),
+        })
+    }
+
+    fn build_dim<const D: usize>(&self) -> Result<Sim<D>> {
+        let g = &self.grid;
+        let origin = vector::<D>("grid.origin", &g.origin)?;
+        if g.cells.len() != D {
+            return Err(Error::invalid(format!(
+                "grid.cells has {} entries for a {D}D grid",
+                g.cells.len()
+            )));
+        }
+        let cells: [usize; D] = std::array::from_fn(|a| g.cells[a]);
+        let mut sim = Sim::<D>::new(origin, cells, g.cell_size).map_err(context("grid"))?;
+        let o = &self.options;
+        let shape = Shape::from_kind(o.shape, o.rk_order, o.rk_support);
+        sim.set_shape(shape).map_err(context("options"))?;
+        sim.set_integration(Integration::from_kind(o.integration, o.vc_order))
+            .map_err(context("options"))?;
+        sim.set_transfer(Transfer::from_kind(o.transfer, o.flip))
+            .map_err(context("options"))?;
+        sim.set_scheme(o.scheme).map_err(context("options"))?;
+        if let Some(g) = &o.gravity {
+            sim.set_gravity(vector::<D>("options.gravity", g)?)
+                .map_err(context("options"))?;
+        }
+        if let Some(mu) = o.contact_friction {
+            sim.set_contact(Some(mu)).map_err(context("options"))?;
+        }
+        for (k, w) in self.walls.iter().enumerate() {
+            let kind = Wall::from_kind(w.kind, w.friction);
+            sim.set_wall(w.axis, w.side, kind)
+                .map_err(context(&format!("walls[{k}]")))?;
+        }
+        let mut ids = Vec::new();
+        for (k, m) in self.materials.iter().enumerate() {
+            let here = format!("materials[{k}] \"{}\"", m.name);
+            if self.materials[..k].iter().any(|o| o.name == m.name) {
+                return Err(Error::invalid(format!("{here}: the name is used twice")));
+            }
+            let material = m.material().map_err(context(&here))?;
+            ids.push(sim.add_material(material));
+        }
+        for (k, b) in self.bodies.iter().enumerate() {
+            let here = format!("bodies[{k}]");
+            let id = self
+                .materials
+                .iter()
+                .position(|m| m.name == b.material)
+                .ok_or_else(|| {
+                    Error::invalid(format!(
+                        "{here}: material \"{}\" is not among the materials ({})",
+                        b.material,
+                        self.materials
+                            .iter()
+                            .map(|m| format!("\"{}\"", m.name))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                })?;
+            let (x, vol, v) = b.particles::<D>(&sim, &self.base).map_err(context(&here))?;
+            if x.is_empty() {
+                return Err(Error::invalid(format!(
+                    "{here}: the body holds no particle (is it inside the grid?)"
+                )));
+            }
+            sim.add_particles(ids[id], &x, &vol, v.as_deref())
+                .map_err(context(&here))?;
+        }
+        if !(self.run.end_time.is_finite() && self.run.end_time > 0.0) {
+            return Err(Error::invalid(format!(
+                "run.end_time must be positive, got {}",
+                self.run.end_time
+            )));
+        }
+        sim.stable_dt(self.run.cfl).map_err(context("run"))?;
+        Ok(sim)
+    }
+}
+
+impl MaterialSpec {
+    fn need(&self, what: &str, v: Option<f64>) -> Result<f64> {
+        v.ok_or_else(|| Error::invalid(format!("{what} is required for {:?}", self.model)))
+    }
+
+    fn material(&self) -> Result<Material> {
+        let elastic = || -> Result<(f64, f64)> {
+            Ok((
+                self.need("young", self.young)?,
+                self.need("poisson", self.poisson)?,
+            ))
+        };
+        match self.model {
+            Model::LinearElastic => {
+                let (e, nu) = elastic()?;
+                Material::linear_elastic(self.density, e, nu)
+            }
+            Model::NeoHookean => {
+                let (e, nu) = elastic()?;
+                Material::neo_hookean(self.density, e, nu)
+            }
+            Model::DruckerPrager => {
+                let (e, nu) = elastic()?;
+                Material::drucker_prager(
+                    self.density,
+                    e,
+                    nu,
+                    self.need("friction_angle", self.friction_angle)?,
+                    self.cohesion.unwrap_or(0.0),
+                    self.dilatancy_angle.unwrap_or(0.0),
+                )
+            }
+            Model::JohnsonCook => {
+                let (e, nu) = elastic()?;
+                let j = self.johnson_cook.as_ref().ok_or_else(|| {
+                    Error::invalid("a [materials.johnson_cook] table is required for johnson_cook")
+                })?;
+                Material::johnson_cook(JohnsonCookParameters {
+                    density: self.density,
+                    young: e,
+                    poisson: nu,
+                    a: j.a,
+                    b: j.b,
+                    n: j.n,
+                    c: j.c,
+                    reference_strain_rate: j.reference_strain_rate,
+                    m: j.m,
+                    room_temperature: j.room_temperature,
+                    melt_temperature: j.melt_temperature,
+                    specific_heat: j.specific_heat,
+                    taylor_quinney: j.taylor_quinney,
+                    damage: j.damage,
+                    eos: j.mie_gruneisen.map(|[c0, s, gamma]| MieGruneisen {
+                        sound_speed: c0,
+                        slope: s,
+                        gamma0: gamma,
+                    }),
+                })
+            }
+            Model::Rigid => {
+                let v = self.velocity.clone().unwrap_or_default();
+                if v.len() > 3 {
+                    return Err(Error::invalid("velocity has more than 3 components"));
+                }
+                let mut w = [0.0; 3];
+                w[..v.len()].copy_from_slice(&v);
+                Material::rigid(self.density, w)
+            }
+        }
+    }
+}
+
+impl BodySpec {
+    /// Positions, volumes and (optional) velocities of the body's particles.
+    #[allow(clippy::type_complexity)]
+    fn particles<const D: usize>(
+        &self,
+        sim: &Sim<D>,
+        base: &Path,
+    ) -> Result<(Vec<Vector<D>>, Vec<f64>, Option<Vec<Vector<D>>>)> {
+        let given = [
+            self.boxed.is_some(),
+            self.sphere.is_some(),
+            self.cylinder.is_some(),
+            self.file.is_some(),
+        ]
+        .iter()
+        .filter(|&&b| b)
+        .count();
+        if given != 1 {
+            return Err(Error::invalid(format!(
+                "give exactly one of box, sphere, cylinder and file (found {given})"
+            )));
+        }
+        let velocity = match &self.velocity {
+            Some(v) => Some(vector::<D>("velocity", v)?),
+            None => None,
+        };
+        if let Some(file) = &self.file {
+            let (x, vol, v) = read_particle_file::<D>(&base.join(file))?;
+            let v = match (v, velocity) {
+                (Some(v), _) => Some(v),
+                (None, Some(u)) => Some(vec![u; x.len()]),
+                (None, None) => None,
+            };
+            return Ok((x, vol, v));
+        }
+        let inside: Box<dyn Fn(&Vector<D>) -> bool> = if let Some(b) = &self.boxed {
+            let (lo, hi) = (
+                vector::<D>("box.min", &b.min)?,
+                vector::<D>("box.max", &b.max)?,
+            );
+            Box::new(move |x| (0..D).all(|a| x[a] >= lo[a] && x[a] <= hi[a]))
+        } else if let Some(s) = &self.sphere {
+            let c = vector::<D>("sphere.center", &s.center)?;
+            let r = s.radius;
+            Box::new(move |x| (x - c).norm() <= r)
+        } else {
+            let c = self.cylinder.as_ref().expect("one shape is given");
+            let base = vector::<D>("cylinder.base", &c.base)?;
+            if c.axis >= D {
+                return Err(Error::invalid(format!(
+                    "cylinder.axis {} is not an axis of a {D}D grid",
+                    c.axis
+                )));
+            }
+            let (axis, r, len) = (c.axis, c.radius, c.length);
+            Box::new(move |x| {
+                let d = x - base;
+                let mut radial = d;
+                radial[axis] = 0.0;
+                d[axis] >= 0.0 && d[axis] <= len && radial.norm() <= r
+            })
+        };
+        let n = self.particles_per_cell;
+        if n == 0 || n > 8 {
+            return Err(Error::invalid(format!(
+                "particles_per_cell must lie in 1..=8, got {n}"
+            )));
+        }
+        let grid = sim.grid();
+        let q = grid.cell_size / n as f64;
+        let counts: [usize; D] = std::array::from_fn(|a| grid.cells[a] * n);
+        let total: usize = counts.iter().product();
+        let mut x = Vec::new();
+        for k in 0..total {
+            let mut r = k;
+            let p = Vector::<D>::from_fn(|a, _| {
+                let i = r % counts[a];
+                r /= counts[a];
+                grid.origin[a] + (i as f64 + 0.5) * q
+            });
+            if inside(&p) {
+                x.push(p);
+            }
+        }
+        let vol = vec![q.powi(D as i32); x.len()];
+        let v = match (&self.sine_velocity, velocity) {
+            (None, None) => None,
+            (None, Some(u)) => Some(vec![u; x.len()]),
+            (Some(s), u) => {
+                let amplitude = vector::<D>("sine_velocity.amplitude", &s.amplitude)?;
+                if s.along >= D {
+                    return Err(Error::invalid(format!(
+                        "sine_velocity.along {} is not an axis of a {D}D grid",
+                        s.along
+                    )));
+                }
+                let u = u.unwrap_or_else(Vector::zeros);
+                Some(
+                    x.iter()
+                        .map(|p| u + amplitude * (s.wavenumber * p[s.along]).sin())
+                        .collect(),
+                )
+            }
+        };
+        Ok((x, vol, v))
+    }
+}
+
+/// Reads `x y [z] volume [vx vy [vz]]` lines.
+#[allow(clippy::type_complexity)]
+fn read_particle_file<const D: usize>(
+    path: &Path,
+) -> Result<(Vec<Vector<D>>, Vec<f64>, Option<Vec<Vector<D>>>)> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Error::new(
+            ErrorKind::Io,
+            format!("cannot read {}: {e}", path.display()),
+        )
+    })?;
+    let (mut x, mut vol, mut v) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let at = || format!("{}: line {}", path.display(), k + 1);
+        let values: Vec<f64> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|s| !s.is_empty())
+            .map(|s| {
+                s.parse::<f64>()
+                    .map_err(|_| Error::invalid(format!("{}: \"{s}\" is not a number", at())))
+            })
+            .collect::<Result<_>>()?;
+        if values.len() != D + 1 && values.len() != 2 * D + 1 {
+            return Err(Error::invalid(format!(
+                "{}: {} values; a {D}D particle line has {} (x, volume) or {} (x, volume, v)",
+                at(),
+                values.len(),
+                D + 1,
+                2 * D + 1
+            )));
+        }
+        if !v.is_empty() && values.len() == D + 1 || v.len() != x.len() && values.len() > D + 1 {
+            return Err(Error::invalid(format!(
+                "{}: give velocities on every line or on none",
+                at()
+            )));
+        }
+        x.push(Vector::<D>::from_column_slice(&values[..D]));
+        vol.push(values[D]);
+        if values.len() > D + 1 {
+            v.push(Vector::<D>::from_column_slice(&values[D + 1..]));
+        }
+    }
+    let v = (!v.is_empty()).then_some(v);
+    Ok((x, vol, v))
+}
+
+fn vector<const D: usize>(what: &str, v: &[f64]) -> Result<Vector<D>> {
+    if v.len() != D {
+        return Err(Error::invalid(format!(
+            "{what} has {} components for a {D}D scene",
+            v.len()
+        )));
+    }
+    Ok(Vector::<D>::from_column_slice(v))
+}
+
+fn context(here: &str) -> impl Fn(Error) -> Error + '_ {
+    move |e| Error::new(e.kind, format!("{here}: {}", e.message))
+}
+
+/// The scenes that ship with rkmpm, by name, as TOML text (`runner/scenes/*.toml`).
+pub const BUNDLED: [(&str, &str); 5] = [
+    ("disks", include_str!("../scenes/disks.toml")),
+    ("bar", include_str!("../scenes/bar.toml")),
+    ("collapse", include_str!("../scenes/collapse.toml")),
+    ("taylor", include_str!("../scenes/taylor.toml")),
+    ("penetration", include_str!("../scenes/penetration.toml")),
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_bundled_scene_builds() {
+        for (name, text) in BUNDLED {
+            let scene = Scene::from_toml(text, name).unwrap();
+            assert!(!scene.title.is_empty(), "{name} has a title");
+            scene.build().unwrap_or_else(|e| panic!("{name}: {e}"));
+            if let Some(other) = scene.comparison() {
+                other
+                    .build()
+                    .unwrap_or_else(|e| panic!("{name}, [compare]: {e}"));
+            }
+        }
+    }
+
+    /// The default scene compares the seed's method with the plain B-spline: `[compare]`
+    /// replaces the options whole and keeps the rest of the scene.
+    #[test]
+    fn the_comparison_takes_the_compare_options_and_nothing_else() {
+        let scene = Scene::from_toml(BUNDLED[0].1, "disks").unwrap();
+        assert_eq!(scene.options.shape, ShapeKind::Rk);
+        assert_eq!(scene.options.integration, IntegrationKind::Vc);
+        let other = scene.comparison().expect("disks has a [compare] table");
+        assert_eq!(other.options.shape, ShapeKind::Bspline2);
+        assert_eq!(other.options.integration, IntegrationKind::MaterialPoint);
+        assert!(other.compare.is_none());
+        assert_eq!(other.bodies.len(), scene.bodies.len());
+        assert_eq!(other.run.end_time, scene.run.end_time);
+        let e = Scene::from_toml(
+            &format!("{}\n[compare]\nshape = \"quartic\"\n", BUNDLED[3].1),
+            "bad.toml",
+        )
+        .unwrap_err();
+        assert!(e.message.contains("quartic"), "{}", e.message);
+    }
+
+    /// Misspelt keys, missing keys and values of the wrong type name their line and field.
+    #[test]
+    fn bad_files_name_the_line_and_the_field() {
+        let good = BUNDLED[0].1;
+        let cases = [
+            (good.replace("density = ", "densty = "), "densty"),
+            (
+                good.replace("cell_size = 0.025", "cell_size = \"fine\""),
+                "cell_size",
+            ),
+            (
+                good.replace("model = \"neo_hookean\"", "model = \"jelly\""),
+                "jelly",
+            ),
+            (good.replace("end_time = 3.0", ""), "end_time"),
+        ];
+        for (text, field) in cases {
+            let e = Scene::from_toml(&text, "bad.toml").unwrap_err();
+            assert!(e.message.contains("bad.toml: line "), "{}", e.message);
+            assert!(e.message.contains(field), "{}", e.message);
+        }
+        // A value the engine refuses names the table it came from.
+        let text = good.replace("young = 1000.0", "young = -1.0");
+        let e = Scene::from_toml(&text, "x").unwrap().build().err().unwrap();
+        assert!(
+            e.message.starts_with("materials[0] \"rubber\": "),
+            "{}",
+            e.message
+        );
+        let text = good.replace("material = \"rubber\"", "material = \"steel\"");
+        let e = Scene::from_toml(&text, "x").unwrap().build().err().unwrap();
+        assert!(
+            e.message.contains("\"steel\" is not among"),
+            "{}",
+            e.message
+        );
+    }
+}

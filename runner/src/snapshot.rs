@@ -1,0 +1,320 @@
+//! A PNG picture of the particles, coloured by a chosen field: the first horizontal axis against
+//! the last (x–y in 2D, x–z in 3D), each particle a dot, with a colour bar that names the field,
+//! its unit and its range.
+
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use rkmpm::particles::Field;
+use rkmpm::Sim;
+use std::path::Path;
+
+/// The fields a picture can be coloured by, with how a value per particle is made of them.
+pub const FIELDS: [&str; 10] = [
+    "velocity",
+    "displacement",
+    "stress",
+    "pressure",
+    "volume",
+    "mass",
+    "deformation_gradient",
+    "plastic_strain",
+    "damage",
+    "material",
+];
+
+/// One value per particle: the magnitude of vectors, the von Mises stress, `det F`.
+fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String), String> {
+    if name == "material" {
+        let m = &sim.particles().material;
+        return Ok((m.iter().map(|&k| k as f64).collect(), "material id".into()));
+    }
+    let field = Field::ALL
+        .iter()
+        .copied()
+        .find(|f| f.name() == name && *f != Field::Position && *f != Field::ReferencePosition)
+        .ok_or_else(|| format!("--png {name}: choose one of {}", FIELDS.join(", ")))?;
+    let raw = sim.field(field);
+    let per = field.components(D);
+    let chunks = raw.chunks(per);
+    Ok(match field {
+        Field::Velocity | Field::Displacement => (
+            chunks
+                .map(|v| v.iter().map(|c| c * c).sum::<f64>().sqrt())
+                .collect(),
+            format!(
+                "|{name}| ({})",
+                if field == Field::Velocity { "m/s" } else { "m" }
+            ),
+        ),
+        Field::Stress => (
+            chunks
+                .map(|s| {
+                    let m = rkmpm::Matrix::<D>::from_row_slice(s);
+                    let dev = m - rkmpm::Matrix::<D>::identity() * (m.trace() / D as f64);
+                    (1.5 * dev.norm_squared()).sqrt()
+                })
+                .collect(),
+            "von Mises stress, in-plane (Pa)".into(),
+        ),
+        Field::DeformationGradient => (
+            chunks
+                .map(|f| rkmpm::determinant(&rkmpm::Matrix::<D>::from_row_slice(f)))
+                .collect(),
+            "det F".into(),
+        ),
+        _ => {
+            let unit = match field {
+                Field::Pressure => " (Pa)",
+                Field::Volume if D == 2 => " (m²)",
+                Field::Volume => " (m³)",
+                Field::Mass if D == 2 => " (kg/m)",
+                Field::Mass => " (kg)",
+                _ => "",
+            };
+            (raw, format!("{}{unit}", name.replace('_', " ")))
+        }
+    })
+}
+
+/// Blue (low) through green to red (high).
+fn colour(t: f64) -> RGBColor {
+    let t = t.clamp(0.0, 1.0);
+    let stops = [
+        (0.0, (48.0, 18.0, 160.0)),
+        (0.33, (30.0, 150.0, 200.0)),
+        (0.66, (120.0, 200.0, 60.0)),
+        (1.0, (220.0, 40.0, 30.0)),
+    ];
+    let k = stops.iter().position(|s| s.0 >= t).unwrap_or(3).max(1);
+    let (t0, a) = stops[k - 1];
+    let (t1, b) = stops[k];
+    let u = (t - t0) / (t1 - t0);
+    RGBColor(
+        (a.0 + u * (b.0 - a.0)) as u8,
+        (a.1 + u * (b.1 - a.1)) as u8,
+        (a.2 + u * (b.2 - a.2)) as u8,
+    )
+}
+
+/// Writes the pictures of several runs of one scene side by side, each under its label, on one
+/// colour scale and the same axes, so that their fields compare at a glance.
+pub fn write_panels<const D: usize>(
+    runs: &[(&Sim<D>, String)],
+    field: &str,
+    title: &str,
+    path: &Path,
+) -> Result<(), String> {
+    let mut fields = Vec::with_capacity(runs.len());
+    for (sim, _) in runs {
+        fields.push(values(*sim, field)?);
+    }
+    let label = fields.first().map(|f| f.1.clone()).unwrap_or_default();
+    let fail = |e: Box<dyn std::error::Error>| format!("writing {}: {e}", path.display());
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
+    )
+    .map_err(|_| "the bundled font cannot be read".to_string())?;
+    let (a, b) = (0, D - 1);
+    let cell = runs
+        .iter()
+        .map(|(s, _)| s.grid().cell_size)
+        .fold(0.0, f64::max);
+    let range = |axis: usize| {
+        let (lo, hi) = runs
+            .iter()
+            .flat_map(|(s, _)| s.particles().position.iter().map(move |p| p[axis]))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| {
+                (l.min(c), h.max(c))
+            });
+        let pad = 0.05 * (hi - lo).max(cell);
+        (lo - pad, hi + pad)
+    };
+    let ((x0, x1), (y0, y1)) = (range(a), range(b));
+    let all: Vec<f64> = fields.iter().flat_map(|f| f.0.iter().copied()).collect();
+    let scale = ColourScale::of(&all, field == "material");
+    let (lo, span) = (scale.lo, scale.hi - scale.lo);
+    let panel = if runs.len() > 1 { 800u32 } else { 1000 };
+    let width = panel * runs.len().max(1) as u32;
+    let head = if runs.len() > 1 { 40.0 } else { 0.0 };
+    let bar = 70;
+    let height = ((panel as f64 - 90.0) * (y1 - y0) / (x1 - x0) + 110.0 + head).clamp(300.0, 1400.0)
+        as u32
+        + bar;
+    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(Box::new(e)))?;
+    let (root, bar_area) = root.split_vertically(height - bar);
+    let both = if runs.len() > 1 { " of both runs" } else { "" };
+    draw_colour_bar(&bar_area, &scale, &format!("{label}{both}")).map_err(fail)?;
+    let time = runs.first().map_or(0.0, |(s, _)| s.time());
+    let (root, caption) = if runs.len() > 1 {
+        let area = root
+            .titled(
+                &format!("{title}, t = {time:.4e} s: {label}, one colour scale"),
+                ("sans-serif", 18),
+            )
+            .map_err(|e| fail(Box::new(e)))?;
+        (area, None)
+    } else {
+        (root, Some(format!("{title}, t = {time:.4e} s")))
+    };
+    let axes = ["x", "y", "z"];
+    let areas = root.split_evenly((1, runs.len().max(1)));
+    for ((area, (sim, name)), (v, _)) in areas.iter().zip(runs).zip(&fields) {
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                caption.clone().unwrap_or_else(|| {
+                    let (l, h) = extremes(v);
+                    format!("{name}: {l:.3e} to {h:.3e}")
+                }),
+                ("sans-serif", 16),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| fail(Box::new(e)))?;
+        chart
+            .configure_mesh()
+            .x_desc(format!("{} (m)", axes[a]))
+            .y_desc(format!("{} (m)", axes[b]))
+            .draw()
+            .map_err(|e| fail(Box::new(e)))?;
+        let dot = ((panel as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
+        let x = &sim.particles().position;
+        chart
+            .draw_series(x.iter().zip(v).map(|(p, &c)| {
+                Circle::new(
+                    (p[a], p[b]),
+                    dot,
+                    colour(((c - lo) / span).clamp(0.0, 1.0)).filled(),
+                )
+            }))
+            .map_err(|e| fail(Box::new(e)))?;
+    }
+    root.present().map_err(|e| fail(Box::new(e)))?;
+    Ok(())
+}
+
+/// The smallest and largest of `v`.
+fn extremes(v: &[f64]) -> (f64, f64) {
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &c| {
+            (l.min(c), h.max(c))
+        })
+}
+
+/// The values the colours run between. A field with a long tail (a few particles far beyond
+/// the rest: the pressure spikes of material-point integration, plastic strain concentrated in
+/// a band) is drawn between its 1st and 99th percentiles, so that the body shows, and values
+/// beyond take the end colours; the bar says so and gives the extremes.
+struct ColourScale {
+    lo: f64,
+    hi: f64,
+    extremes: (f64, f64),
+    clipped: bool,
+}
+
+impl ColourScale {
+    fn of(values: &[f64], discrete: bool) -> Self {
+        let extremes = extremes(values);
+        let mut sorted: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+        sorted.sort_by(f64::total_cmp);
+        let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize];
+        let (lo, hi, clipped) = if sorted.len() < 100 || discrete {
+            (extremes.0, extremes.1, false)
+        } else {
+            let (p1, p99) = (at(0.01), at(0.99));
+            // A tail counts as long when the extremes span twice what the percentiles do.
+            let long = (extremes.1 - extremes.0) > 2.0 * (p99 - p1) && p99 > p1;
+            if long {
+                (p1, p99, true)
+            } else {
+                (extremes.0, extremes.1, false)
+            }
+        };
+        let hi = if hi > lo { hi } else { lo + 1.0 };
+        ColourScale {
+            lo,
+            hi,
+            extremes,
+            clipped,
+        }
+    }
+}
+
+/// A horizontal colour bar under the panels: the gradient with its end and middle values, and
+/// the field's name and unit (and, when clipped to percentiles, the extremes).
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    scale: &ColourScale,
+    label: &str,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
+    let (w, _) = area.dim_in_pixel();
+    let (x0, x1) = (w as i32 / 5, 4 * w as i32 / 5);
+    let (y0, y1) = (8, 28);
+    let steps = 200;
+    for i in 0..steps {
+        let a = x0 + (x1 - x0) * i / steps;
+        let b = x0 + (x1 - x0) * (i + 1) / steps;
+        let t = (i as f64 + 0.5) / steps as f64;
+        area.draw(&Rectangle::new([(a, y0), (b, y1)], colour(t).filled()))?;
+    }
+    area.draw(&Rectangle::new([(x0, y0), (x1, y1)], BLACK.stroke_width(1)))?;
+    let font = ("sans-serif", 14).into_font();
+    let mid = 0.5 * (scale.lo + scale.hi);
+    for (x, v) in [(x0, scale.lo), ((x0 + x1) / 2, mid), (x1, scale.hi)] {
+        area.draw(&Text::new(
+            format!("{v:.3e}"),
+            (x - 30, y1 + 4),
+            font.clone(),
+        ))?;
+    }
+    let text = if scale.clipped {
+        format!(
+            "{label}: 1st to 99th percentile, beyond drawn at the ends (all from {:.3e} to {:.3e})",
+            scale.extremes.0, scale.extremes.1
+        )
+    } else {
+        label.to_string()
+    };
+    area.draw(&Text::new(text, (x0, y1 + 22), font))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ColourScale;
+
+    /// A body near zero with a few spikes is drawn between its percentiles; a field without a
+    /// tail, and material ids, between their extremes.
+    #[test]
+    fn long_tails_are_clipped_to_percentiles_and_said_so() {
+        let mut v: Vec<f64> = (0..1000).map(|i| i as f64 / 1000.0).collect();
+        v[7] = 50.0;
+        v[8] = -20.0;
+        let s = ColourScale::of(&v, false);
+        assert!(s.clipped);
+        assert_eq!(s.extremes, (-20.0, 50.0));
+        assert!(
+            (s.lo - 0.01).abs() < 2e-3 && (s.hi - 0.99).abs() < 2e-3,
+            "{} {}",
+            s.lo,
+            s.hi
+        );
+        let plain: Vec<f64> = (0..1000).map(|i| i as f64).collect();
+        let s = ColourScale::of(&plain, false);
+        assert!(!s.clipped);
+        assert_eq!((s.lo, s.hi), (0.0, 999.0));
+        let s = ColourScale::of(&v, true);
+        assert!(!s.clipped);
+        assert_eq!((s.lo, s.hi), (-20.0, 50.0));
+        // A constant field still gets a scale of nonzero width.
+        let s = ColourScale::of(&[3.0; 200], false);
+        assert_eq!((s.lo, s.hi), (3.0, 4.0));
+    }
+}
