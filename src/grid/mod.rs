@@ -13,7 +13,10 @@ use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::Vector;
 
 mod blocks;
+mod shared;
 pub use blocks::{Bins, BlockLayout};
+use shared::is_written;
+pub use shared::{scatter_add, NodeList, NodeScatter, SharedSlice};
 
 /// Geometry of the background grid. Nodes have integer indices `-ghost ..= cells + ghost` per axis.
 #[derive(Debug, Clone, PartialEq)]
@@ -399,10 +402,6 @@ impl<const D: usize> GridNodes<D> {
     }
 }
 
-/// Write access to the node fields of a [`GridNodes`] from several threads at once, for the
-/// coloured particle-to-grid map (`step::bins`): the caller guarantees that no two threads write
-/// the same node. Nodes written are marked touched; [`GridNodes::collect_touched`] lists them
-/// afterwards. The slots of nodes listed before the scatter (by VC) stay readable.
 /// The closed box `[lower, upper]` of a grid's domain ([`Grid::domain`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DomainBox<const D: usize> {
@@ -416,187 +415,6 @@ impl<const D: usize> DomainBox<D> {
     pub fn contains(&self, x: &Vector<D>) -> bool {
         (0..D).all(|a| x[a] >= self.lower[a] && x[a] <= self.upper[a])
     }
-}
-
-#[derive(Clone, Copy)]
-pub struct NodeScatter<'a, const D: usize> {
-    pub mass: *mut f64,
-    pub momentum: *mut Vector<D>,
-    pub force: *mut Vector<D>,
-    /// Null when the field is not kept.
-    pub mass_gradient: *mut Vector<D>,
-    /// Null when the field is not kept.
-    pub body_force: *mut Vector<D>,
-    touched: *mut bool,
-    /// Slots of the nodes listed before the scatter.
-    pub slot: &'a [u32],
-    len: usize,
-}
-
-// SAFETY: the pointers address the node storage of one `GridNodes`, borrowed mutably for the
-// scatter's lifetime; the callers write disjoint nodes from different threads (colours).
-unsafe impl<const D: usize> Sync for NodeScatter<'_, D> {}
-unsafe impl<const D: usize> Send for NodeScatter<'_, D> {}
-
-impl<'a, const D: usize> NodeScatter<'a, D> {
-    /// Access to all fields of `nodes` (which stays mutably borrowed while this lives).
-    pub fn new(nodes: &'a mut GridNodes<D>) -> Self {
-        let opt = |v: &mut Vec<Vector<D>>| {
-            if v.is_empty() {
-                std::ptr::null_mut()
-            } else {
-                v.as_mut_ptr()
-            }
-        };
-        NodeScatter {
-            mass: nodes.mass.as_mut_ptr(),
-            momentum: nodes.momentum.as_mut_ptr(),
-            force: nodes.force.as_mut_ptr(),
-            mass_gradient: opt(&mut nodes.mass_gradient),
-            body_force: opt(&mut nodes.body_force),
-            touched: nodes.touched.as_mut_ptr(),
-            slot: &nodes.slot,
-            len: nodes.mass.len(),
-        }
-    }
-
-    /// Marks node `n` touched.
-    ///
-    /// # Safety
-    /// No other thread writes node `n` during the scatter.
-    #[inline(always)]
-    pub unsafe fn touch(&self, n: usize) {
-        assert!(n < self.len);
-        *self.touched.add(n) = true;
-    }
-
-    /// Checks that the box of `width` nodes per axis from storage index `base` (with the
-    /// given strides) lies inside the node storage, so that [`NodeScatter::touch_unchecked`]
-    /// and the sums may address it.
-    #[inline(always)]
-    pub fn check_box(&self, base: usize, strides: &[usize; D], width: usize) {
-        let last = base + strides.iter().map(|s| (width - 1) * s).sum::<usize>();
-        assert!(last < self.len);
-    }
-
-    /// Marks node `n` touched, without the bounds check of [`NodeScatter::touch`].
-    ///
-    /// # Safety
-    /// As [`NodeScatter::touch`], and `n` lies in a box [`NodeScatter::check_box`] accepted.
-    #[inline(always)]
-    pub unsafe fn touch_unchecked(&self, n: usize) {
-        *self.touched.add(n) = true;
-    }
-}
-
-/// Write access to disjoint parts of one slice from several threads (per-node storage of the
-/// coloured sums); the caller guarantees that no two threads touch the same element.
-pub struct SharedSlice<'a, T> {
-    ptr: *mut T,
-    len: usize,
-    _slice: std::marker::PhantomData<&'a mut [T]>,
-}
-
-// SAFETY: see the type's documentation; every access goes through `range`, whose callers
-// guarantee disjointness.
-unsafe impl<T: Send> Sync for SharedSlice<'_, T> {}
-
-impl<'a, T> SharedSlice<'a, T> {
-    pub fn new(slice: &'a mut [T]) -> Self {
-        SharedSlice {
-            ptr: slice.as_mut_ptr(),
-            len: slice.len(),
-            _slice: std::marker::PhantomData,
-        }
-    }
-
-    /// Length of the slice.
-    pub fn len(&self) -> usize {
-        self.len
-    }
-
-    /// Whether the slice is empty.
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
-    /// The elements `start .. start + len`.
-    ///
-    /// # Safety
-    /// No other thread accesses these elements while the returned slice lives.
-    #[allow(clippy::mut_from_ref)]
-    #[inline(always)]
-    pub unsafe fn range(&self, start: usize, len: usize) -> &mut [T] {
-        assert!(start + len <= self.len);
-        std::slice::from_raw_parts_mut(self.ptr.add(start), len)
-    }
-
-    /// The address of element `i` (not dereferenced).
-    #[inline(always)]
-    pub fn as_ptr_at(&self, i: usize) -> *const T {
-        self.ptr.wrapping_add(i)
-    }
-
-    /// Element `i`.
-    ///
-    /// # Safety
-    /// No other thread accesses element `i` while the returned reference lives.
-    #[allow(clippy::mut_from_ref)]
-    #[inline(always)]
-    pub unsafe fn at(&self, i: usize) -> &mut T {
-        assert!(i < self.len);
-        &mut *self.ptr.add(i)
-    }
-}
-
-/// Whether a node with this touched mark and mass was written this step, and so belongs in the
-/// active list: the one rule of the serial collection ([`GridNodes::collect_touched`]) and the
-/// parallel one ([`GridNodes::count_written`], [`NodeList::is_written`]), which must agree.
-#[inline(always)]
-fn is_written(touched: bool, mass: f64) -> bool {
-    touched | (mass != 0.0)
-}
-
-/// Puts nodes into the active list from several threads ([`GridNodes::list`]).
-pub struct NodeList<'a> {
-    active: SharedSlice<'a, usize>,
-    slot: SharedSlice<'a, u32>,
-    touched: SharedSlice<'a, bool>,
-    mass: &'a [f64],
-}
-
-impl NodeList<'_> {
-    /// Whether [`GridNodes::collect_touched`] would list node `n` (marked touched or given
-    /// mass).
-    ///
-    /// # Safety
-    /// No other thread puts node `n` meanwhile.
-    #[inline(always)]
-    pub unsafe fn is_written(&self, n: usize) -> bool {
-        is_written(*self.touched.at(n), self.mass[n])
-    }
-
-    /// Lists node `n` at position `k` of `active`, marked touched: what
-    /// [`GridNodes::collect_touched`] does for the `k`-th node it lists.
-    ///
-    /// # Safety
-    /// No other thread puts a node at `k` or puts node `n`.
-    #[inline(always)]
-    pub unsafe fn put(&self, k: usize, n: usize) {
-        *self.active.at(k) = n;
-        *self.slot.at(n) = k as u32;
-        *self.touched.at(n) = true;
-    }
-}
-
-/// `*field[n] += value` for a field pointer of a [`NodeScatter`].
-///
-/// # Safety
-/// `field` is one of the scatter's non-null pointers, `n` was checked by [`NodeScatter::touch`]
-/// and no other thread writes node `n` during the scatter.
-#[inline(always)]
-pub unsafe fn scatter_add<T: std::ops::AddAssign>(field: *mut T, n: usize, value: T) {
-    *field.add(n) += value;
 }
 
 /// Per-node sums of signed shape functions' nonnegative lumping (`step::edge_lumping`).

@@ -157,141 +157,165 @@ impl BSpline {
         values: &mut [[[f64; W]; D]],
         derivatives: Option<&mut [[[f64; W]; D]]>,
     ) -> bool {
-        use std::arch::x86_64::*;
-        assert!(x.len() == 4 && first.len() == 4 && values.len() == 4 && W == self.order.width());
-        // Functions, not closures: a closure is not inlined by force, and the intrinsics in it
-        // would become calls.
-        #[inline(always)]
-        unsafe fn set(x: f64) -> __m256d {
-            _mm256_set1_pd(x)
-        }
-        #[inline(always)]
-        unsafe fn mul(a: __m256d, b: __m256d) -> __m256d {
-            _mm256_mul_pd(a, b)
-        }
-        #[inline(always)]
-        unsafe fn sub(a: __m256d, b: __m256d) -> __m256d {
-            _mm256_sub_pd(a, b)
-        }
-        #[inline(always)]
-        unsafe fn add(a: __m256d, b: __m256d) -> __m256d {
-            _mm256_add_pd(a, b)
-        }
-        /// `−a` (the sign flipped, as the scalar negation).
-        #[inline(always)]
-        unsafe fn negate(a: __m256d) -> __m256d {
-            _mm256_xor_pd(a, set(-0.0))
-        }
-        #[inline(always)]
-        unsafe fn floor(a: __m256d) -> __m256d {
-            _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a)
-        }
-        /// The cubic's inner branch at distance `r`: value and derivative.
-        #[inline(always)]
-        unsafe fn inner(r: __m256d) -> (__m256d, __m256d) {
-            let value = add(
-                sub(mul(mul(mul(set(0.5), r), r), r), mul(r, r)),
-                set(2.0 / 3.0),
+        // SAFETY: the caller runs this inside `Lanes::wide`, so the processor has AVX2 and FMA;
+        // every load and store stays inside the four particles' arrays, whose lengths are
+        // asserted.
+        unsafe {
+            use std::arch::x86_64::*;
+            assert!(
+                x.len() == 4 && first.len() == 4 && values.len() == 4 && W == self.order.width()
             );
-            let derivative = sub(mul(mul(set(1.5), r), r), mul(set(2.0), r));
-            (value, derivative)
-        }
-        // The coordinates per axis as lanes: in 2D two loads of the four interleaved positions
-        // and a shuffle (`x0 y0 x1 y1 | x2 y2 x3 y3` → `x0 x1 x2 x3`, `y0 y1 y2 y3`), else
-        // value by value.
-        let mut coordinates = [set(0.0); D];
-        if D == 2 {
-            let p = x.as_ptr() as *const f64;
-            let (a, b) = (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4)));
-            coordinates[0] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpacklo_pd(a, b));
-            coordinates[1] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpackhi_pd(a, b));
-        } else {
-            for a in 0..D {
-                coordinates[a] = _mm256_set_pd(x[3][a], x[2][a], x[1][a], x[0][a]);
+            // Functions, not closures: a closure is not inlined by force, and the intrinsics in it
+            // would become calls.
+            #[inline(always)]
+            unsafe fn set(x: f64) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_set1_pd(x) }
             }
-        }
-        // Cell units, `(x − origin) / h`, per axis; within 2^30 cells of the origin, so that
-        // the first nodes convert to 32-bit integers exactly.
-        let mut xi = [set(0.0); D];
-        let mut inside = true;
-        for a in 0..D {
-            xi[a] = _mm256_div_pd(
-                sub(coordinates[a], set(grid.origin[a])),
-                set(grid.cell_size),
-            );
-            let magnitude = _mm256_andnot_pd(set(-0.0), xi[a]);
-            let limit = set((1u64 << 30) as f64);
-            inside &= _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(magnitude, limit)) == 0b1111;
-        }
-        if !inside {
-            return false;
-        }
-        let inv_h = set(1.0 / grid.cell_size);
-        let mut first_lanes = [_mm_setzero_si128(); D];
-        let mut w = [[set(0.0); W]; D];
-        let mut dw = [[set(0.0); W]; D];
-        for a in 0..D {
-            // The first node, an integer in floating point (exact), and `t = xi − first`.
-            let f = match self.order {
-                BSplineOrder::Linear => floor(xi[a]),
-                BSplineOrder::Quadratic => floor(sub(xi[a], set(0.5))),
-                BSplineOrder::Cubic => sub(floor(xi[a]), set(1.0)),
-            };
-            let t = sub(xi[a], f);
-            // Exact: `f` is an integer below 2^30 in magnitude.
-            first_lanes[a] = _mm256_cvtpd_epi32(f);
-            let (w, dw) = (&mut w[a], &mut dw[a]);
-            match self.order {
-                BSplineOrder::Linear => {
-                    (w[0], w[1]) = (sub(set(1.0), t), t);
-                    (dw[0], dw[1]) = (set(-1.0), set(1.0));
-                }
-                BSplineOrder::Quadratic => {
-                    let (u, c, l) = (sub(set(1.5), t), sub(t, set(1.0)), sub(t, set(0.5)));
-                    w[0] = mul(mul(set(0.5), u), u);
-                    w[1] = sub(set(0.75), mul(c, c));
-                    w[2] = mul(mul(set(0.5), l), l);
-                    (dw[0], dw[1], dw[2]) = (negate(u), mul(set(-2.0), c), l);
-                }
-                BSplineOrder::Cubic => {
-                    let (u, r1, r2, l) = (
-                        sub(set(2.0), t),
-                        sub(t, set(1.0)),
-                        sub(set(2.0), t),
-                        sub(t, set(1.0)),
+            #[inline(always)]
+            unsafe fn mul(a: __m256d, b: __m256d) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_mul_pd(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn sub(a: __m256d, b: __m256d) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_sub_pd(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn add(a: __m256d, b: __m256d) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_add_pd(a, b) }
+            }
+            /// `−a` (the sign flipped, as the scalar negation).
+            #[inline(always)]
+            unsafe fn negate(a: __m256d) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_xor_pd(a, set(-0.0)) }
+            }
+            #[inline(always)]
+            unsafe fn floor(a: __m256d) -> __m256d {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe { _mm256_round_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(a) }
+            }
+            /// The cubic's inner branch at distance `r`: value and derivative.
+            #[inline(always)]
+            unsafe fn inner(r: __m256d) -> (__m256d, __m256d) {
+                // SAFETY: only `factors_4` calls this, inside `Lanes::wide`: the processor has
+                // AVX2 and FMA.
+                unsafe {
+                    let value = add(
+                        sub(mul(mul(mul(set(0.5), r), r), r), mul(r, r)),
+                        set(2.0 / 3.0),
                     );
-                    let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
-                    w[0] = _mm256_div_pd(mul(mul(u, u), u), set(6.0));
-                    (w[1], w[2]) = (w1, w2);
-                    w[3] = _mm256_div_pd(mul(mul(l, l), l), set(6.0));
-                    dw[0] = mul(mul(set(-0.5), u), u);
-                    (dw[1], dw[2]) = (d1, negate(d2));
-                    dw[3] = mul(mul(set(0.5), l), l);
+                    let derivative = sub(mul(mul(set(1.5), r), r), mul(set(2.0), r));
+                    (value, derivative)
                 }
             }
-            for d in dw.iter_mut() {
-                *d = mul(*d, inv_h);
+            // The coordinates per axis as lanes: in 2D two loads of the four interleaved positions
+            // and a shuffle (`x0 y0 x1 y1 | x2 y2 x3 y3` → `x0 x1 x2 x3`, `y0 y1 y2 y3`), else
+            // value by value.
+            let mut coordinates = [set(0.0); D];
+            if D == 2 {
+                let p = x.as_ptr() as *const f64;
+                let (a, b) = (_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(4)));
+                coordinates[0] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpacklo_pd(a, b));
+                coordinates[1] = _mm256_permute4x64_pd::<0xD8>(_mm256_unpackhi_pd(a, b));
+            } else {
+                for a in 0..D {
+                    coordinates[a] = _mm256_set_pd(x[3][a], x[2][a], x[1][a], x[0][a]);
+                }
             }
-        }
-        // The first nodes, `first[q][a]`: in 2D interleaved in registers and stored as two
-        // rows, else lane by lane.
-        if D == 2 {
-            let o = first.as_mut_ptr() as *mut __m128i;
-            _mm_storeu_si128(o, _mm_unpacklo_epi32(first_lanes[0], first_lanes[1]));
-            _mm_storeu_si128(o.add(1), _mm_unpackhi_epi32(first_lanes[0], first_lanes[1]));
-        } else {
+            // Cell units, `(x − origin) / h`, per axis; within 2^30 cells of the origin, so that
+            // the first nodes convert to 32-bit integers exactly.
+            let mut xi = [set(0.0); D];
+            let mut inside = true;
             for a in 0..D {
-                let lanes: [i32; 4] = std::mem::transmute(first_lanes[a]);
-                for (q, first) in first.iter_mut().enumerate() {
-                    first[a] = lanes[q];
+                xi[a] = _mm256_div_pd(
+                    sub(coordinates[a], set(grid.origin[a])),
+                    set(grid.cell_size),
+                );
+                let magnitude = _mm256_andnot_pd(set(-0.0), xi[a]);
+                let limit = set((1u64 << 30) as f64);
+                inside &=
+                    _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(magnitude, limit)) == 0b1111;
+            }
+            if !inside {
+                return false;
+            }
+            let inv_h = set(1.0 / grid.cell_size);
+            let mut first_lanes = [_mm_setzero_si128(); D];
+            let mut w = [[set(0.0); W]; D];
+            let mut dw = [[set(0.0); W]; D];
+            for a in 0..D {
+                // The first node, an integer in floating point (exact), and `t = xi − first`.
+                let f = match self.order {
+                    BSplineOrder::Linear => floor(xi[a]),
+                    BSplineOrder::Quadratic => floor(sub(xi[a], set(0.5))),
+                    BSplineOrder::Cubic => sub(floor(xi[a]), set(1.0)),
+                };
+                let t = sub(xi[a], f);
+                // Exact: `f` is an integer below 2^30 in magnitude.
+                first_lanes[a] = _mm256_cvtpd_epi32(f);
+                let (w, dw) = (&mut w[a], &mut dw[a]);
+                match self.order {
+                    BSplineOrder::Linear => {
+                        (w[0], w[1]) = (sub(set(1.0), t), t);
+                        (dw[0], dw[1]) = (set(-1.0), set(1.0));
+                    }
+                    BSplineOrder::Quadratic => {
+                        let (u, c, l) = (sub(set(1.5), t), sub(t, set(1.0)), sub(t, set(0.5)));
+                        w[0] = mul(mul(set(0.5), u), u);
+                        w[1] = sub(set(0.75), mul(c, c));
+                        w[2] = mul(mul(set(0.5), l), l);
+                        (dw[0], dw[1], dw[2]) = (negate(u), mul(set(-2.0), c), l);
+                    }
+                    BSplineOrder::Cubic => {
+                        let (u, r1, r2, l) = (
+                            sub(set(2.0), t),
+                            sub(t, set(1.0)),
+                            sub(set(2.0), t),
+                            sub(t, set(1.0)),
+                        );
+                        let ((w1, d1), (w2, d2)) = (inner(r1), inner(r2));
+                        w[0] = _mm256_div_pd(mul(mul(u, u), u), set(6.0));
+                        (w[1], w[2]) = (w1, w2);
+                        w[3] = _mm256_div_pd(mul(mul(l, l), l), set(6.0));
+                        dw[0] = mul(mul(set(-0.5), u), u);
+                        (dw[1], dw[2]) = (d1, negate(d2));
+                        dw[3] = mul(mul(set(0.5), l), l);
+                    }
+                }
+                for d in dw.iter_mut() {
+                    *d = mul(*d, inv_h);
                 }
             }
+            // The first nodes, `first[q][a]`: in 2D interleaved in registers and stored as two
+            // rows, else lane by lane.
+            if D == 2 {
+                let o = first.as_mut_ptr() as *mut __m128i;
+                _mm_storeu_si128(o, _mm_unpacklo_epi32(first_lanes[0], first_lanes[1]));
+                _mm_storeu_si128(o.add(1), _mm_unpackhi_epi32(first_lanes[0], first_lanes[1]));
+            } else {
+                for a in 0..D {
+                    let lanes: [i32; 4] = std::mem::transmute(first_lanes[a]);
+                    for (q, first) in first.iter_mut().enumerate() {
+                        first[a] = lanes[q];
+                    }
+                }
+            }
+            store_transposed(values, &w);
+            if let Some(derivatives) = derivatives {
+                store_transposed(derivatives, &dw);
+            }
+            true
         }
-        store_transposed(values, &w);
-        if let Some(derivatives) = derivatives {
-            store_transposed(derivatives, &dw);
-        }
-        true
     }
 }
 
@@ -310,44 +334,49 @@ unsafe fn store_transposed<const D: usize, const W: usize>(
     out: &mut [[[f64; W]; D]],
     lanes: &[[std::arch::x86_64::__m256d; W]; D],
 ) {
-    use std::arch::x86_64::*;
-    assert!(out.len() == 4);
-    let count = D * W;
-    // SAFETY: `[[[f64; W]; D]; 4]` and `[[__m256d; W]; D]` are arrays of f64 and of registers
-    // without padding; `out` holds 4 · count values.
-    let r = std::slice::from_raw_parts(lanes.as_ptr() as *const __m256d, count);
-    let o = out.as_mut_ptr() as *mut f64;
-    let mut j = 0;
-    while j + 4 <= count {
-        let (t0, t1) = (
-            _mm256_unpacklo_pd(r[j], r[j + 1]),
-            _mm256_unpackhi_pd(r[j], r[j + 1]),
-        );
-        let (t2, t3) = (
-            _mm256_unpacklo_pd(r[j + 2], r[j + 3]),
-            _mm256_unpackhi_pd(r[j + 2], r[j + 3]),
-        );
-        _mm256_storeu_pd(o.add(j), _mm256_permute2f128_pd::<0x20>(t0, t2));
-        _mm256_storeu_pd(o.add(count + j), _mm256_permute2f128_pd::<0x20>(t1, t3));
-        _mm256_storeu_pd(o.add(2 * count + j), _mm256_permute2f128_pd::<0x31>(t0, t2));
-        _mm256_storeu_pd(o.add(3 * count + j), _mm256_permute2f128_pd::<0x31>(t1, t3));
-        j += 4;
-    }
-    if j + 2 <= count {
-        let (u0, u1) = (
-            _mm256_unpacklo_pd(r[j], r[j + 1]),
-            _mm256_unpackhi_pd(r[j], r[j + 1]),
-        );
-        _mm_storeu_pd(o.add(j), _mm256_castpd256_pd128(u0));
-        _mm_storeu_pd(o.add(count + j), _mm256_castpd256_pd128(u1));
-        _mm_storeu_pd(o.add(2 * count + j), _mm256_extractf128_pd::<1>(u0));
-        _mm_storeu_pd(o.add(3 * count + j), _mm256_extractf128_pd::<1>(u1));
-        j += 2;
-    }
-    if j < count {
-        let l: [f64; 4] = std::mem::transmute(r[j]);
-        for (q, value) in l.into_iter().enumerate() {
-            *o.add(q * count + j) = value;
+    // SAFETY: the caller runs this inside `Lanes::wide`, so the processor has AVX2 and FMA;
+    // every load and store stays inside the four particles' arrays, whose lengths are
+    // asserted.
+    unsafe {
+        use std::arch::x86_64::*;
+        assert!(out.len() == 4);
+        let count = D * W;
+        // SAFETY: `[[[f64; W]; D]; 4]` and `[[__m256d; W]; D]` are arrays of f64 and of registers
+        // without padding; `out` holds 4 · count values.
+        let r = std::slice::from_raw_parts(lanes.as_ptr() as *const __m256d, count);
+        let o = out.as_mut_ptr() as *mut f64;
+        let mut j = 0;
+        while j + 4 <= count {
+            let (t0, t1) = (
+                _mm256_unpacklo_pd(r[j], r[j + 1]),
+                _mm256_unpackhi_pd(r[j], r[j + 1]),
+            );
+            let (t2, t3) = (
+                _mm256_unpacklo_pd(r[j + 2], r[j + 3]),
+                _mm256_unpackhi_pd(r[j + 2], r[j + 3]),
+            );
+            _mm256_storeu_pd(o.add(j), _mm256_permute2f128_pd::<0x20>(t0, t2));
+            _mm256_storeu_pd(o.add(count + j), _mm256_permute2f128_pd::<0x20>(t1, t3));
+            _mm256_storeu_pd(o.add(2 * count + j), _mm256_permute2f128_pd::<0x31>(t0, t2));
+            _mm256_storeu_pd(o.add(3 * count + j), _mm256_permute2f128_pd::<0x31>(t1, t3));
+            j += 4;
+        }
+        if j + 2 <= count {
+            let (u0, u1) = (
+                _mm256_unpacklo_pd(r[j], r[j + 1]),
+                _mm256_unpackhi_pd(r[j], r[j + 1]),
+            );
+            _mm_storeu_pd(o.add(j), _mm256_castpd256_pd128(u0));
+            _mm_storeu_pd(o.add(count + j), _mm256_castpd256_pd128(u1));
+            _mm_storeu_pd(o.add(2 * count + j), _mm256_extractf128_pd::<1>(u0));
+            _mm_storeu_pd(o.add(3 * count + j), _mm256_extractf128_pd::<1>(u1));
+            j += 2;
+        }
+        if j < count {
+            let l: [f64; 4] = std::mem::transmute(r[j]);
+            for (q, value) in l.into_iter().enumerate() {
+                *o.add(q * count + j) = value;
+            }
         }
     }
 }

@@ -653,96 +653,101 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
         input: &ScatterInput<D>,
         out: &NodeScatter<D>,
     ) {
-        // The derivatives only for the force and the mass gradient (not stored under MLS).
-        let derivatives = FORCE || (EXTRA && input.with_gradient);
-        let Factors {
-            base,
-            w,
-            dw,
-            offsets,
-        } = self.factors(p, derivatives, AFFINE.then_some(&input.position));
-        out.check_box(base, &self.strides, W);
-        let offset = |a: usize, k: usize| offsets[a][k];
-        let m = input.mass;
-        let mc = input.affine.unwrap_or_else(Matrix::zeros);
-        let (vs, b) = input
-            .force
-            .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
-        // Axis-0 part of the affine momentum, per node of a row.
-        let mut affine0 = [Vector::<D>::zeros(); W];
-        if AFFINE {
-            for (k0, a0) in affine0.iter_mut().enumerate() {
-                *a0 = mc.column(0) * offset(0, k0);
-            }
-        }
-        let mut k = [0usize; D];
-        let mut row = base;
-        for _ in 0..W.pow(D as u32 - 1) {
-            let mut c = 1.0;
-            for a in 1..D {
-                c *= w[a][k[a]];
-            }
-            let c_a: [f64; D] = std::array::from_fn(|a| {
-                if a == 0 {
-                    return 0.0;
-                }
-                let mut c_a = 1.0;
-                for b in 1..D {
-                    c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
-                }
-                c_a
-            });
-            let mut momentum_row = input.momentum;
+        // SAFETY: the caller keeps the contract of `StencilView::scatter`: no other thread
+        // writes these nodes; `check_box` accepted the whole stencil box, so every node written
+        // lies inside the storage.
+        unsafe {
+            // The derivatives only for the force and the mass gradient (not stored under MLS).
+            let derivatives = FORCE || (EXTRA && input.with_gradient);
+            let Factors {
+                base,
+                w,
+                dw,
+                offsets,
+            } = self.factors(p, derivatives, AFFINE.then_some(&input.position));
+            out.check_box(base, &self.strides, W);
+            let offset = |a: usize, k: usize| offsets[a][k];
+            let m = input.mass;
+            let mc = input.affine.unwrap_or_else(Matrix::zeros);
+            let (vs, b) = input
+                .force
+                .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
+            // Axis-0 part of the affine momentum, per node of a row.
+            let mut affine0 = [Vector::<D>::zeros(); W];
             if AFFINE {
-                for a in 1..D {
-                    momentum_row += mc.column(a) * offset(a, k[a]);
+                for (k0, a0) in affine0.iter_mut().enumerate() {
+                    *a0 = mc.column(0) * offset(0, k0);
                 }
             }
-            let (mut force0, mut force_rest) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-            if FORCE {
+            let mut k = [0usize; D];
+            let mut row = base;
+            for _ in 0..W.pow(D as u32 - 1) {
+                let mut c = 1.0;
                 for a in 1..D {
-                    force_rest += c_a[a] * vs.column(a);
+                    c *= w[a][k[a]];
                 }
-                force0 = c * vs.column(0);
-            }
-            for k0 in 0..W {
-                let n = row + k0;
-                let value = w[0][k0] * c;
-                let gradient = Vector::<D>::from_fn(|a, _| {
+                let c_a: [f64; D] = std::array::from_fn(|a| {
                     if a == 0 {
-                        dw[0][k0] * c
-                    } else {
-                        w[0][k0] * c_a[a]
+                        return 0.0;
                     }
+                    let mut c_a = 1.0;
+                    for b in 1..D {
+                        c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+                    }
+                    c_a
                 });
-                if value == 0.0 && (W >= 3 || gradient == Vector::<D>::zeros()) {
-                    continue;
-                }
-                if !MASS {
-                    // A node that gets mass needs no mark: `GridNodes::collect_touched` lists
-                    // the nodes with mass too.
-                    out.touch_unchecked(n);
-                }
-                scatter_add(out.momentum, n, value * (momentum_row + affine0[k0]));
-                if MASS {
-                    scatter_add(out.mass, n, m * value);
-                    if EXTRA && input.with_gradient {
-                        scatter_add(out.mass_gradient, n, m * gradient);
+                let mut momentum_row = input.momentum;
+                if AFFINE {
+                    for a in 1..D {
+                        momentum_row += mc.column(a) * offset(a, k[a]);
                     }
                 }
+                let (mut force0, mut force_rest) = (Vector::<D>::zeros(), Vector::<D>::zeros());
                 if FORCE {
-                    scatter_add(out.force, n, dw[0][k0] * force0 + w[0][k0] * force_rest);
-                    if EXTRA && input.with_body_force {
-                        let field = if input.keep_body_force {
-                            out.body_force
+                    for a in 1..D {
+                        force_rest += c_a[a] * vs.column(a);
+                    }
+                    force0 = c * vs.column(0);
+                }
+                for k0 in 0..W {
+                    let n = row + k0;
+                    let value = w[0][k0] * c;
+                    let gradient = Vector::<D>::from_fn(|a, _| {
+                        if a == 0 {
+                            dw[0][k0] * c
                         } else {
-                            out.force
-                        };
-                        scatter_add(field, n, (m * value) * b);
+                            w[0][k0] * c_a[a]
+                        }
+                    });
+                    if value == 0.0 && (W >= 3 || gradient == Vector::<D>::zeros()) {
+                        continue;
+                    }
+                    if !MASS {
+                        // A node that gets mass needs no mark: `GridNodes::collect_touched` lists
+                        // the nodes with mass too.
+                        out.touch_unchecked(n);
+                    }
+                    scatter_add(out.momentum, n, value * (momentum_row + affine0[k0]));
+                    if MASS {
+                        scatter_add(out.mass, n, m * value);
+                        if EXTRA && input.with_gradient {
+                            scatter_add(out.mass_gradient, n, m * gradient);
+                        }
+                    }
+                    if FORCE {
+                        scatter_add(out.force, n, dw[0][k0] * force0 + w[0][k0] * force_rest);
+                        if EXTRA && input.with_body_force {
+                            let field = if input.keep_body_force {
+                                out.body_force
+                            } else {
+                                out.force
+                            };
+                            scatter_add(field, n, (m * value) * b);
+                        }
                     }
                 }
+                self.next_row(&mut k, &mut row);
             }
-            self.next_row(&mut k, &mut row);
         }
     }
 }
@@ -802,38 +807,48 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
     /// general version when there is a body force or a mass gradient to add.
     #[inline(always)]
     unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
-        let extra = input.with_mass && (input.with_body_force || input.with_gradient);
-        let (affine, mass, force) = (
-            input.affine.is_some(),
-            input.with_mass,
-            input.force.is_some(),
-        );
-        match (affine, mass, force, extra) {
-            // The second map of MUSL: momentum only.
-            (true, false, _, _) => self.scatter_rows::<true, false, false, false>(p, input, out),
-            (false, false, _, _) => self.scatter_rows::<false, false, false, false>(p, input, out),
-            // APIC and PIC/FLIP: mass, momentum and force.
-            (true, true, true, false) => {
-                self.scatter_rows::<true, true, true, false>(p, input, out)
+        // SAFETY: the caller keeps `StencilView::scatter`'s contract (no other thread writes this
+        // stencil's nodes); the AVX2 rows run only when `self.lanes` says the processor has it.
+        unsafe {
+            let extra = input.with_mass && (input.with_body_force || input.with_gradient);
+            let (affine, mass, force) = (
+                input.affine.is_some(),
+                input.with_mass,
+                input.force.is_some(),
+            );
+            match (affine, mass, force, extra) {
+                // The second map of MUSL: momentum only.
+                (true, false, _, _) => {
+                    self.scatter_rows::<true, false, false, false>(p, input, out)
+                }
+                (false, false, _, _) => {
+                    self.scatter_rows::<false, false, false, false>(p, input, out)
+                }
+                // APIC and PIC/FLIP: mass, momentum and force.
+                (true, true, true, false) => {
+                    self.scatter_rows::<true, true, true, false>(p, input, out)
+                }
+                (false, true, true, false) => {
+                    self.scatter_rows::<false, true, true, false>(p, input, out)
+                }
+                (true, true, true, true) => {
+                    self.scatter_rows::<true, true, true, true>(p, input, out)
+                }
+                (false, true, true, true) => {
+                    self.scatter_rows::<false, true, true, true>(p, input, out)
+                }
+                // MLS: mass and momentum (the force is in the momentum).
+                (true, true, false, false) => {
+                    self.scatter_rows::<true, true, false, false>(p, input, out)
+                }
+                (true, true, false, true) => {
+                    self.scatter_rows::<true, true, false, true>(p, input, out)
+                }
+                // Mass without force or affine term: not a case the step has; node by node.
+                (false, true, false, _) => return false,
             }
-            (false, true, true, false) => {
-                self.scatter_rows::<false, true, true, false>(p, input, out)
-            }
-            (true, true, true, true) => self.scatter_rows::<true, true, true, true>(p, input, out),
-            (false, true, true, true) => {
-                self.scatter_rows::<false, true, true, true>(p, input, out)
-            }
-            // MLS: mass and momentum (the force is in the momentum).
-            (true, true, false, false) => {
-                self.scatter_rows::<true, true, false, false>(p, input, out)
-            }
-            (true, true, false, true) => {
-                self.scatter_rows::<true, true, false, true>(p, input, out)
-            }
-            // Mass without force or affine term: not a case the step has; node by node.
-            (false, true, false, _) => return false,
+            true
         }
-        true
     }
 
     // The row loop and its factors `c`, `c_a` are written out here and in `scatter` on purpose:
@@ -986,21 +1001,32 @@ mod avx2 {
     /// `s + a x`, lane by lane.
     #[inline(always)]
     unsafe fn add_scaled(s: __m256d, a: f64, x: __m256d) -> __m256d {
-        _mm256_add_pd(s, _mm256_mul_pd(_mm256_set1_pd(a), x))
+        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
+        // processor has AVX2 and FMA.
+        unsafe { _mm256_add_pd(s, _mm256_mul_pd(_mm256_set1_pd(a), x)) }
     }
 
     /// The three components of `v[n]` and a zero (`n < v.len()`, checked by the caller).
     #[inline(always)]
     unsafe fn load(v: &[Vector<3>], n: usize) -> __m256d {
-        let mask = _mm256_set_epi64x(0, -1, -1, -1);
-        _mm256_maskload_pd(v.as_ptr().add(n) as *const f64, mask)
+        // SAFETY: the kernels pass an index `n` of `v` (a node of the stencil), so the three
+        // unmasked lanes read `v[n]` alone (the fourth is masked off); the processor has AVX2,
+        // as for the helpers above.
+        unsafe {
+            let mask = _mm256_set_epi64x(0, -1, -1, -1);
+            _mm256_maskload_pd(v.as_ptr().add(n) as *const f64, mask)
+        }
     }
 
     #[inline(always)]
     unsafe fn vector(x: __m256d) -> Vector<3> {
-        let mut l = [0.0; 4];
-        _mm256_storeu_pd(l.as_mut_ptr(), x);
-        Vector::<3>::new(l[0], l[1], l[2])
+        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
+        // processor has AVX2 and FMA.
+        unsafe {
+            let mut l = [0.0; 4];
+            _mm256_storeu_pd(l.as_mut_ptr(), x);
+            Vector::<3>::new(l[0], l[1], l[2])
+        }
     }
 
     /// [`StencilView::gather`](super::StencilView::gather) of a 3D view, as the portable one.
@@ -1018,110 +1044,125 @@ mod avx2 {
         affine: bool,
         gradient: bool,
     ) -> Gathered<D> {
-        assert_eq!(D, 3);
-        // SAFETY (of the casts): `D == 3`, so each is the same type.
-        let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 3, W>);
-        let xp = &*(xp as *const Vector<D> as *const Vector<3>);
-        let cast =
-            |v: &[Vector<D>]| std::slice::from_raw_parts(v.as_ptr() as *const Vector<3>, v.len());
-        let (v, v_old) = (cast(v), v_old.map(cast));
-        let Factors {
-            base,
-            w,
-            dw,
-            offsets,
-        } = view.factors(p, gradient, affine.then_some(xp));
-        let offset = |a: usize, k: usize| offsets[a][k];
-        let off0 = offsets[0];
-        let (zero, minus0) = (_mm256_setzero_pd(), _mm256_set1_pd(-0.0));
-        let (mut velocity, mut velocity_change) = (zero, zero);
-        let (mut gradient_sum, mut affine_sum) = ([zero; 3], [zero; 3]);
-        let mut k = [0usize; 3];
-        let mut row = base;
-        for _ in 0..W * W {
-            assert!(row + W <= v.len() && v_old.is_none_or(|o| row + W <= o.len()));
-            // From −0, as the portable gather.
-            let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (minus0, minus0, minus0, minus0);
-            for k0 in 0..W {
-                let vi = load(v, row + k0);
-                let (wk, dwk) = (w[0][k0], dw[0][k0]);
-                s_w = add_scaled(s_w, wk, vi);
-                if gradient {
-                    s_dw = add_scaled(s_dw, dwk, vi);
-                }
-                if affine {
-                    s_wo = add_scaled(s_wo, wk * off0[k0], vi);
-                }
-                if let Some(v_old) = v_old {
-                    let dv = _mm256_sub_pd(vi, load(v_old, row + k0));
-                    s_dv = add_scaled(s_dv, wk, dv);
-                }
-            }
-            let mut c = 1.0;
-            for a in 1..3 {
-                c *= w[a][k[a]];
-            }
-            velocity = add_scaled(velocity, c, s_w);
-            if v_old.is_some() {
-                velocity_change = add_scaled(velocity_change, c, s_dv);
-            }
-            if gradient {
-                gradient_sum[0] = add_scaled(gradient_sum[0], c, s_dw);
-            }
-            if affine {
-                affine_sum[0] = add_scaled(affine_sum[0], c, s_wo);
-            }
-            for a in 1..3 {
-                if gradient {
-                    let mut c_a = 1.0;
-                    for b in 1..3 {
-                        c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+        // SAFETY: the caller keeps the contract above (AVX2 and FMA present); the loads read
+        // node velocities at indices of the stencil, which lie inside the node arrays.
+        unsafe {
+            assert_eq!(D, 3);
+            // SAFETY (of the casts): `D == 3`, so each is the same type.
+            let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 3, W>);
+            let xp = &*(xp as *const Vector<D> as *const Vector<3>);
+            let cast = |v: &[Vector<D>]| {
+                std::slice::from_raw_parts(v.as_ptr() as *const Vector<3>, v.len())
+            };
+            let (v, v_old) = (cast(v), v_old.map(cast));
+            let Factors {
+                base,
+                w,
+                dw,
+                offsets,
+            } = view.factors(p, gradient, affine.then_some(xp));
+            let offset = |a: usize, k: usize| offsets[a][k];
+            let off0 = offsets[0];
+            let (zero, minus0) = (_mm256_setzero_pd(), _mm256_set1_pd(-0.0));
+            let (mut velocity, mut velocity_change) = (zero, zero);
+            let (mut gradient_sum, mut affine_sum) = ([zero; 3], [zero; 3]);
+            let mut k = [0usize; 3];
+            let mut row = base;
+            for _ in 0..W * W {
+                assert!(row + W <= v.len() && v_old.is_none_or(|o| row + W <= o.len()));
+                // From −0, as the portable gather.
+                let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (minus0, minus0, minus0, minus0);
+                for k0 in 0..W {
+                    let vi = load(v, row + k0);
+                    let (wk, dwk) = (w[0][k0], dw[0][k0]);
+                    s_w = add_scaled(s_w, wk, vi);
+                    if gradient {
+                        s_dw = add_scaled(s_dw, dwk, vi);
                     }
-                    gradient_sum[a] = add_scaled(gradient_sum[a], c_a, s_w);
+                    if affine {
+                        s_wo = add_scaled(s_wo, wk * off0[k0], vi);
+                    }
+                    if let Some(v_old) = v_old {
+                        let dv = _mm256_sub_pd(vi, load(v_old, row + k0));
+                        s_dv = add_scaled(s_dv, wk, dv);
+                    }
+                }
+                let mut c = 1.0;
+                for a in 1..3 {
+                    c *= w[a][k[a]];
+                }
+                velocity = add_scaled(velocity, c, s_w);
+                if v_old.is_some() {
+                    velocity_change = add_scaled(velocity_change, c, s_dv);
+                }
+                if gradient {
+                    gradient_sum[0] = add_scaled(gradient_sum[0], c, s_dw);
                 }
                 if affine {
-                    affine_sum[a] = add_scaled(affine_sum[a], c * offset(a, k[a]), s_w);
+                    affine_sum[0] = add_scaled(affine_sum[0], c, s_wo);
                 }
+                for a in 1..3 {
+                    if gradient {
+                        let mut c_a = 1.0;
+                        for b in 1..3 {
+                            c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
+                        }
+                        gradient_sum[a] = add_scaled(gradient_sum[a], c_a, s_w);
+                    }
+                    if affine {
+                        affine_sum[a] = add_scaled(affine_sum[a], c * offset(a, k[a]), s_w);
+                    }
+                }
+                view.next_row(&mut k, &mut row);
             }
-            view.next_row(&mut k, &mut row);
+            let columns = |sums: [__m256d; 3]| {
+                let c = sums.map(|x| vector(x));
+                Matrix::<3>::from_columns(&c)
+            };
+            let g = Gathered::<3> {
+                velocity: vector(velocity),
+                velocity_change: vector(velocity_change),
+                affine: columns(affine_sum),
+                gradient: columns(gradient_sum),
+            };
+            std::mem::transmute_copy(&g)
         }
-        let columns = |sums: [__m256d; 3]| {
-            let c = sums.map(|x| vector(x));
-            Matrix::<3>::from_columns(&c)
-        };
-        let g = Gathered::<3> {
-            velocity: vector(velocity),
-            velocity_change: vector(velocity_change),
-            affine: columns(affine_sum),
-            gradient: columns(gradient_sum),
-        };
-        std::mem::transmute_copy(&g)
     }
 
     /// `lo + hi` of the two nodes of a pair, after the sum `s` of the nodes before them.
     #[inline(always)]
     unsafe fn add_pair(s: Option<__m128d>, pair: __m256d) -> __m128d {
-        let (lo, hi) = (
-            _mm256_castpd256_pd128(pair),
-            _mm256_extractf128_pd::<1>(pair),
-        );
-        match s {
-            Some(s) => _mm_add_pd(_mm_add_pd(s, lo), hi),
-            None => _mm_add_pd(lo, hi),
+        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
+        // processor has AVX2 and FMA.
+        unsafe {
+            let (lo, hi) = (
+                _mm256_castpd256_pd128(pair),
+                _mm256_extractf128_pd::<1>(pair),
+            );
+            match s {
+                Some(s) => _mm_add_pd(_mm_add_pd(s, lo), hi),
+                None => _mm_add_pd(lo, hi),
+            }
         }
     }
 
     /// `s + a x`, lane by lane.
     #[inline(always)]
     unsafe fn add_scaled_2(s: __m128d, a: f64, x: __m128d) -> __m128d {
-        _mm_add_pd(s, _mm_mul_pd(_mm_set1_pd(a), x))
+        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
+        // processor has AVX2 and FMA.
+        unsafe { _mm_add_pd(s, _mm_mul_pd(_mm_set1_pd(a), x)) }
     }
 
     #[inline(always)]
     unsafe fn vector_2(x: __m128d) -> Vector<2> {
-        let mut l = [0.0; 2];
-        _mm_storeu_pd(l.as_mut_ptr(), x);
-        Vector::<2>::new(l[0], l[1])
+        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
+        // processor has AVX2 and FMA.
+        unsafe {
+            let mut l = [0.0; 2];
+            _mm_storeu_pd(l.as_mut_ptr(), x);
+            Vector::<2>::new(l[0], l[1])
+        }
     }
 
     /// [`StencilView::gather`](super::StencilView::gather) of a 2D view (`W ≤ 4`), as the
@@ -1143,97 +1184,103 @@ mod avx2 {
         affine: bool,
         gradient: bool,
     ) -> Gathered<D> {
-        assert!(D == 2 && (2..=4).contains(&W));
-        // SAFETY (of the casts): `D == 2`, so each is the same type.
-        let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 2, W>);
-        let xp = &*(xp as *const Vector<D> as *const Vector<2>);
-        let cast =
-            |v: &[Vector<D>]| std::slice::from_raw_parts(v.as_ptr() as *const f64, 2 * v.len());
-        let (v, v_old) = (cast(v), v_old.map(cast));
-        let Factors {
-            base,
-            w,
-            dw,
-            offsets,
-        } = view.factors(p, gradient, affine.then_some(xp));
-        // The axis-0 factors of the pairs of nodes and of the last node when `W` is odd.
-        let wo: [f64; W] = std::array::from_fn(|k| w[0][k] * offsets[0][k]);
-        let pair =
-            |f: &[f64; W], j: usize| _mm256_set_pd(f[2 * j + 1], f[2 * j + 1], f[2 * j], f[2 * j]);
-        let zero = _mm256_setzero_pd();
-        let (mut w_pair, mut dw_pair, mut wo_pair) = ([zero; 2], [zero; 2], [zero; 2]);
-        for j in 0..W / 2 {
-            w_pair[j] = pair(&w[0], j);
-            dw_pair[j] = pair(&dw[0], j);
-            wo_pair[j] = pair(&wo, j);
-        }
-        let odd = W % 2 == 1;
-        let single = |f: &[f64; W]| _mm_set1_pd(f[W - 1]);
-        let (w_last, dw_last, wo_last) = (single(&w[0]), single(&dw[0]), single(&wo));
-        let zero = _mm_setzero_pd();
-        let (mut velocity, mut velocity_change) = (zero, zero);
-        let (mut gradient_sum, mut affine_sum) = ([zero; 2], [zero; 2]);
-        let mut row = base;
-        for k1 in 0..W {
-            assert!(2 * (row + W) <= v.len() && v_old.is_none_or(|o| 2 * (row + W) <= o.len()));
-            let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (None, None, None, None);
+        // SAFETY: the caller keeps the contract above (AVX2 and FMA present); the loads read
+        // node velocities at indices of the stencil, which lie inside the node arrays.
+        unsafe {
+            assert!(D == 2 && (2..=4).contains(&W));
+            // SAFETY (of the casts): `D == 2`, so each is the same type.
+            let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 2, W>);
+            let xp = &*(xp as *const Vector<D> as *const Vector<2>);
+            let cast =
+                |v: &[Vector<D>]| std::slice::from_raw_parts(v.as_ptr() as *const f64, 2 * v.len());
+            let (v, v_old) = (cast(v), v_old.map(cast));
+            let Factors {
+                base,
+                w,
+                dw,
+                offsets,
+            } = view.factors(p, gradient, affine.then_some(xp));
+            // The axis-0 factors of the pairs of nodes and of the last node when `W` is odd.
+            let wo: [f64; W] = std::array::from_fn(|k| w[0][k] * offsets[0][k]);
+            let pair = |f: &[f64; W], j: usize| {
+                _mm256_set_pd(f[2 * j + 1], f[2 * j + 1], f[2 * j], f[2 * j])
+            };
+            let zero = _mm256_setzero_pd();
+            let (mut w_pair, mut dw_pair, mut wo_pair) = ([zero; 2], [zero; 2], [zero; 2]);
             for j in 0..W / 2 {
-                let at = 2 * (row + 2 * j);
-                let vj = _mm256_loadu_pd(v.as_ptr().add(at));
-                s_w = Some(add_pair(s_w, _mm256_mul_pd(w_pair[j], vj)));
-                if gradient {
-                    s_dw = Some(add_pair(s_dw, _mm256_mul_pd(dw_pair[j], vj)));
-                }
-                if affine {
-                    s_wo = Some(add_pair(s_wo, _mm256_mul_pd(wo_pair[j], vj)));
-                }
-                if let Some(v_old) = v_old {
-                    let dv = _mm256_sub_pd(vj, _mm256_loadu_pd(v_old.as_ptr().add(at)));
-                    s_dv = Some(add_pair(s_dv, _mm256_mul_pd(w_pair[j], dv)));
-                }
+                w_pair[j] = pair(&w[0], j);
+                dw_pair[j] = pair(&dw[0], j);
+                wo_pair[j] = pair(&wo, j);
             }
-            if odd {
-                let at = 2 * (row + W - 1);
-                let vl = _mm_loadu_pd(v.as_ptr().add(at));
-                // `W ≥ 3` here, so every sum has its first pair.
-                let add = |s: Option<__m128d>, f: __m128d, x: __m128d| {
-                    Some(_mm_add_pd(s.unwrap(), _mm_mul_pd(f, x)))
-                };
-                s_w = add(s_w, w_last, vl);
-                if gradient {
-                    s_dw = add(s_dw, dw_last, vl);
+            let odd = W % 2 == 1;
+            let single = |f: &[f64; W]| _mm_set1_pd(f[W - 1]);
+            let (w_last, dw_last, wo_last) = (single(&w[0]), single(&dw[0]), single(&wo));
+            let zero = _mm_setzero_pd();
+            let (mut velocity, mut velocity_change) = (zero, zero);
+            let (mut gradient_sum, mut affine_sum) = ([zero; 2], [zero; 2]);
+            let mut row = base;
+            for k1 in 0..W {
+                assert!(2 * (row + W) <= v.len() && v_old.is_none_or(|o| 2 * (row + W) <= o.len()));
+                let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (None, None, None, None);
+                for j in 0..W / 2 {
+                    let at = 2 * (row + 2 * j);
+                    let vj = _mm256_loadu_pd(v.as_ptr().add(at));
+                    s_w = Some(add_pair(s_w, _mm256_mul_pd(w_pair[j], vj)));
+                    if gradient {
+                        s_dw = Some(add_pair(s_dw, _mm256_mul_pd(dw_pair[j], vj)));
+                    }
+                    if affine {
+                        s_wo = Some(add_pair(s_wo, _mm256_mul_pd(wo_pair[j], vj)));
+                    }
+                    if let Some(v_old) = v_old {
+                        let dv = _mm256_sub_pd(vj, _mm256_loadu_pd(v_old.as_ptr().add(at)));
+                        s_dv = Some(add_pair(s_dv, _mm256_mul_pd(w_pair[j], dv)));
+                    }
                 }
-                if affine {
-                    s_wo = add(s_wo, wo_last, vl);
+                if odd {
+                    let at = 2 * (row + W - 1);
+                    let vl = _mm_loadu_pd(v.as_ptr().add(at));
+                    // `W ≥ 3` here, so every sum has its first pair.
+                    let add = |s: Option<__m128d>, f: __m128d, x: __m128d| {
+                        Some(_mm_add_pd(s.unwrap(), _mm_mul_pd(f, x)))
+                    };
+                    s_w = add(s_w, w_last, vl);
+                    if gradient {
+                        s_dw = add(s_dw, dw_last, vl);
+                    }
+                    if affine {
+                        s_wo = add(s_wo, wo_last, vl);
+                    }
+                    if let Some(v_old) = v_old {
+                        let dv = _mm_sub_pd(vl, _mm_loadu_pd(v_old.as_ptr().add(at)));
+                        s_dv = add(s_dv, w_last, dv);
+                    }
                 }
-                if let Some(v_old) = v_old {
-                    let dv = _mm_sub_pd(vl, _mm_loadu_pd(v_old.as_ptr().add(at)));
-                    s_dv = add(s_dv, w_last, dv);
+                let s_w = s_w.unwrap();
+                let c = w[1][k1];
+                velocity = add_scaled_2(velocity, c, s_w);
+                if let Some(s_dv) = s_dv {
+                    velocity_change = add_scaled_2(velocity_change, c, s_dv);
                 }
+                if let Some(s_dw) = s_dw {
+                    gradient_sum[0] = add_scaled_2(gradient_sum[0], c, s_dw);
+                    gradient_sum[1] = add_scaled_2(gradient_sum[1], dw[1][k1], s_w);
+                }
+                if let Some(s_wo) = s_wo {
+                    affine_sum[0] = add_scaled_2(affine_sum[0], c, s_wo);
+                    affine_sum[1] = add_scaled_2(affine_sum[1], c * offsets[1][k1], s_w);
+                }
+                row += view.strides[1];
             }
-            let s_w = s_w.unwrap();
-            let c = w[1][k1];
-            velocity = add_scaled_2(velocity, c, s_w);
-            if let Some(s_dv) = s_dv {
-                velocity_change = add_scaled_2(velocity_change, c, s_dv);
-            }
-            if let Some(s_dw) = s_dw {
-                gradient_sum[0] = add_scaled_2(gradient_sum[0], c, s_dw);
-                gradient_sum[1] = add_scaled_2(gradient_sum[1], dw[1][k1], s_w);
-            }
-            if let Some(s_wo) = s_wo {
-                affine_sum[0] = add_scaled_2(affine_sum[0], c, s_wo);
-                affine_sum[1] = add_scaled_2(affine_sum[1], c * offsets[1][k1], s_w);
-            }
-            row += view.strides[1];
+            let columns =
+                |sums: [__m128d; 2]| Matrix::<2>::from_columns(&sums.map(|x| vector_2(x)));
+            let g = Gathered::<2> {
+                velocity: vector_2(velocity),
+                velocity_change: vector_2(velocity_change),
+                affine: columns(affine_sum),
+                gradient: columns(gradient_sum),
+            };
+            std::mem::transmute_copy(&g)
         }
-        let columns = |sums: [__m128d; 2]| Matrix::<2>::from_columns(&sums.map(|x| vector_2(x)));
-        let g = Gathered::<2> {
-            velocity: vector_2(velocity),
-            velocity_change: vector_2(velocity_change),
-            affine: columns(affine_sum),
-            gradient: columns(gradient_sum),
-        };
-        std::mem::transmute_copy(&g)
     }
 }

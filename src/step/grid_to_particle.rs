@@ -122,14 +122,18 @@ impl<const D: usize> NewStateWriter<'_, D> {
     /// No other thread accesses particle `p`'s new state meanwhile.
     #[inline(always)]
     pub unsafe fn store(&self, p: usize, u: &ParticleUpdate<D>) {
-        *self.position.at(p) = u.position;
-        *self.velocity.at(p) = u.velocity;
-        if !self.affine.is_empty() {
-            *self.affine.at(p) = u.affine;
+        // SAFETY: the caller keeps this function's `# Safety` contract: particle `p`'s slots
+        // are this task's alone.
+        unsafe {
+            *self.position.at(p) = u.position;
+            *self.velocity.at(p) = u.velocity;
+            if !self.affine.is_empty() {
+                *self.affine.at(p) = u.affine;
+            }
+            *self.deformation_gradient.at(p) = u.deformation_gradient;
+            *self.stress.at(p) = u.stress;
+            *self.pressure.at(p) = u.pressure;
         }
-        *self.deformation_gradient.at(p) = u.deformation_gradient;
-        *self.stress.at(p) = u.stress;
-        *self.pressure.at(p) = u.pressure;
     }
 
     /// Asks for the cache lines of particles `p .. p + n`'s new state, for writing
@@ -156,17 +160,21 @@ impl<const D: usize> NewStateWriter<'_, D> {
     /// No other thread writes particle `p`'s new state meanwhile.
     #[inline(always)]
     pub unsafe fn get(&self, p: usize) -> ParticleUpdate<D> {
-        ParticleUpdate {
-            position: *self.position.at(p),
-            velocity: *self.velocity.at(p),
-            affine: if self.affine.is_empty() {
-                Matrix::zeros()
-            } else {
-                *self.affine.at(p)
-            },
-            deformation_gradient: *self.deformation_gradient.at(p),
-            stress: *self.stress.at(p),
-            pressure: *self.pressure.at(p),
+        // SAFETY: the caller keeps this function's `# Safety` contract: particle `p`'s slots
+        // are this task's alone.
+        unsafe {
+            ParticleUpdate {
+                position: *self.position.at(p),
+                velocity: *self.velocity.at(p),
+                affine: if self.affine.is_empty() {
+                    Matrix::zeros()
+                } else {
+                    *self.affine.at(p)
+                },
+                deformation_gradient: *self.deformation_gradient.at(p),
+                stress: *self.stress.at(p),
+                pressure: *self.pressure.at(p),
+            }
         }
     }
 
@@ -177,7 +185,9 @@ impl<const D: usize> NewStateWriter<'_, D> {
     #[allow(clippy::mut_from_ref)]
     #[inline(always)]
     pub unsafe fn history(&self, p: usize) -> Option<&mut History> {
-        (!self.history.is_empty()).then(|| self.history.at(p))
+        // SAFETY: the caller keeps this function's `# Safety` contract: particle `p`'s slots
+        // are this task's alone.
+        unsafe { (!self.history.is_empty()).then(|| self.history.at(p)) }
     }
 }
 
@@ -527,12 +537,12 @@ where
                         finish.is_some_and(|f| f.finish_chunk(chunk, updates, &mut speeds[..n]));
                     for (k, (u, ok)) in updates.iter_mut().zip(ok.iter_mut()).enumerate() {
                         let slot = first + k;
-                        // SAFETY: every slot is visited by one task only.
                         let finished = match finish {
                             _ if whole => speeds[k],
                             Some(f) => f.finish(
                                 chunk.particle(k),
                                 u,
+                                // SAFETY: each slot belongs to one chunk, and so to one task.
                                 unsafe { writer.history(slot) }.unwrap_or(scratch),
                             ),
                             None => Some(0.0),
@@ -540,6 +550,7 @@ where
                         *ok = finished.is_some();
                         all_admissible &= *ok;
                         speed = speed.max(finished.unwrap_or(0.0));
+                        // SAFETY: as for the history above.
                         unsafe { writer.store(slot, u) };
                     }
                     (speed, all_admissible)

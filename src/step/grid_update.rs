@@ -77,6 +77,7 @@ pub fn grid_update<const D: usize>(
             Some(_) if !body_force.is_empty() => body_force[n],
             _ => Vector::<D>::zeros(),
         };
+        // SAFETY: as above.
         let (v_old, v) = unsafe { (velocity_old.at(n), velocity.at(n)) };
         if *m <= mass_floor {
             *v = Vector::zeros();
