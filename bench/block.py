@@ -1,4 +1,4 @@
-"""The benchmark block shared by the peers; the same as examples/rust/throughput.rs (keep in sync).
+"""The benchmark block shared by the peers; the same as studies/examples/throughput.rs (keep in sync).
 
 m particles per direction (m even, m^D ~ N), 2 per cell per direction, block b = m/2 cells wide,
 g = 4 + m/16 empty cells on every side, n = b + 2g cells per direction on [0,1]^D, h = 1/n.

@@ -1,6 +1,6 @@
 """Peer benchmark: 2D/3D quadratic B-spline MLS-MPM (APIC) with neo-Hookean, f64, on Taichi's CPU
 backend with --threads threads. Same block, grid, material, dt and steps as
-examples/rust/throughput.rs (bench/block.py) and the same step as bench/warp_mpm.py. Prints one
+studies/examples/throughput.rs (bench/block.py) and the same step as bench/warp_mpm.py. Prints one
 CSV line like the rkmpm example.
 
     python bench/taichi_mpm.py --dim 2 --particles 65536 --steps 50 --threads 2

@@ -1,6 +1,6 @@
 """Peer benchmark: 2D/3D quadratic B-spline MLS-MPM (APIC) with neo-Hookean, f64, on NVIDIA Warp's
 CPU backend (single-threaded). Same block, grid, material, dt and steps as
-examples/rust/throughput.rs (bench/block.py). Prints one CSV line like the rkmpm example.
+studies/examples/throughput.rs (bench/block.py). Prints one CSV line like the rkmpm example.
 
 Step: clear grid; P2G (momentum m v + (m C - dt V0 4/h^2 tau) (x_i - x_p), mass; tau the Kirchhoff
 stress mu (F F^T - I) + lambda ln J I, plane strain in 2D); grid velocity = momentum / mass

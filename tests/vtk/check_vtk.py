@@ -7,8 +7,8 @@
 DIR holds the output of
     rkmpm run bar --quiet --out DIR
     rkmpm run taylor --quiet --frames 2 --end-time 2e-6 --out DIR
-(scripts/test-vtk.sh runs them and this). The scene parameters are read from scenes/bar.toml and
-scenes/taylor.toml; the Taylor overrides are TAYLOR_FRAMES and TAYLOR_END_TIME below.
+(scripts/test-vtk.sh runs them and this). The scene parameters are read from runner/scenes/bar.toml and
+runner/scenes/taylor.toml; the Taylor overrides are TAYLOR_FRAMES and TAYLOR_END_TIME below.
 
 Prints one line per check group and exits 1 listing every failed check.
 """
@@ -23,7 +23,7 @@ import meshio
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENES = ROOT / "scenes"
+SCENES = ROOT / "runner" / "scenes"
 
 # Particles per cell per direction of a scene's `box`/`cylinder` bodies (the engine's default; the
 # scene files do not set it).
@@ -240,7 +240,7 @@ def check_bar(out):
     period = 2 * math.pi / (b * math.sqrt(young / rho))
     require(
         abs(end - period) <= 1e-12 * period,
-        f"scenes/bar.toml: end_time {end} is not one period {period} of the bar: update this checker",
+        f"runner/scenes/bar.toml: end_time {end} is not one period {period} of the bar: update this checker",
     )
     s = h / PPC
     counts = np.round((hi - lo) / s).astype(int)
@@ -341,7 +341,7 @@ def check_taylor(out):
     cyl = body["cylinder"]
     require(
         cyl["axis"] == 2 and cyl["base"] == [0.0, 0.0, 0.0],
-        "scenes/taylor.toml: the rod is no longer along z from the origin: update this checker",
+        "runner/scenes/taylor.toml: the rod is no longer along z from the origin: update this checker",
     )
     radius, length = cyl["radius"], cyl["length"]
     vel = np.array(body["velocity"])
