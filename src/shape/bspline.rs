@@ -438,6 +438,10 @@ impl<const D: usize> ShapeFunction<D> for BSpline {
         1
     }
 
+    fn tensor_order(&self) -> Option<BSplineOrder> {
+        Some(self.order)
+    }
+
     fn stencil_width(&self) -> usize {
         self.order.width()
     }

@@ -13,7 +13,7 @@ mod stencil;
 pub use bspline::{BSpline, BSplineOrder};
 pub use monomials::Monomials;
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
-pub use rk::{cubic_kernel, ReproducingKernel, MAX_CONDITION};
+pub use rk::{cubic_kernel, LatticeRk1, ReproducingKernel, MAX_CONDITION};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use stencil::{
     Gathered, ScatterInput, StencilNode, StencilView, Stencils, TensorStencils, TensorView,
@@ -33,6 +33,12 @@ impl Shape {
             Shape::Linear => Ok(Box::new(BSpline::new(BSplineOrder::Linear))),
             Shape::BSpline2 => Ok(Box::new(BSpline::new(BSplineOrder::Quadratic))),
             Shape::BSpline3 => Ok(Box::new(BSpline::new(BSplineOrder::Cubic))),
+            // On the grid's full lattice RK1 with ã = 2 is the cubic B-spline (to round-off,
+            // `rk_order_one_support_two_is_the_cubic_bspline`): computed as one.
+            Shape::Rk {
+                order: 1,
+                support: 2.0,
+            } => Ok(Box::new(LatticeRk1::new())),
             Shape::Rk { order, support } => {
                 Ok(Box::new(ReproducingKernel::<D>::new(order, support)?))
             }
@@ -71,6 +77,11 @@ pub trait ShapeFunction<const D: usize>: Send + Sync {
     fn apic_inertia(&self, cell_size: f64) -> Option<f64>;
     /// Polynomial degree the shape function reproduces.
     fn reproduction_order(&self) -> u32;
+    /// The B-spline whose 1D factors give this shape function on the lattice, when there is
+    /// one: the step then takes the factored, vectorised stencils (without VC).
+    fn tensor_order(&self) -> Option<BSplineOrder> {
+        None
+    }
     /// Whether `Ψ_I` takes negative values somewhere (RK of order ≥ 2). The lumped mass
     /// `Σ_p m_p Ψ_I(x_p)` of a node that barely overlaps a body can then be negative or tiny, and
     /// the step blends in [`ShapeFunction::lumping_weights`] there (METHOD.md section 1, and

@@ -11,7 +11,7 @@
 //! over one cell, when the shape function is built, and a support that makes `M` singular or badly
 //! conditioned is refused.
 
-use super::{Monomials, ShapeFunction};
+use super::{BSpline, BSplineOrder, Monomials, ShapeFunction};
 use crate::error::{Error, Result};
 use crate::grid::Grid;
 use crate::Vector;
@@ -213,6 +213,73 @@ impl<const D: usize> ReproducingKernel<D> {
     /// `H(z)`: the monomials at `z`.
     fn basis(&self, z: &Vector<D>, h: &mut DVector<f64>) {
         self.basis.values(z, h.as_mut_slice());
+    }
+}
+
+/// RK of order 1 with normalized support ã = 2. On the grid's full lattice (the ghost layers
+/// make it one everywhere) its moment matrix is the same in every cell and the correction is the
+/// identity: the functions are the cubic B-spline's (METHOD.md section 2; equal to 1e-13 in
+/// `shape/tests.rs`). So they are computed as the B-spline's, with its factored and vectorised
+/// stencils. What distinguishes the RK option stays: APIC through `Σ_I v_I ⊗ ∇Ψ_I` (no inertia
+/// `D_p`) and the RK's ghost layers.
+#[derive(Debug, Clone, Copy)]
+pub struct LatticeRk1 {
+    cubic: BSpline,
+}
+
+impl LatticeRk1 {
+    pub fn new() -> Self {
+        LatticeRk1 {
+            cubic: BSpline::new(BSplineOrder::Cubic),
+        }
+    }
+}
+
+impl Default for LatticeRk1 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const D: usize> ShapeFunction<D> for LatticeRk1 {
+    fn stencil_len(&self) -> usize {
+        ShapeFunction::<D>::stencil_len(&self.cubic)
+    }
+
+    fn stencil_width(&self) -> usize {
+        ShapeFunction::<D>::stencil_width(&self.cubic)
+    }
+
+    fn stencil_origin(&self, xi: &Vector<D>) -> [i64; D] {
+        self.cubic.stencil_origin(xi)
+    }
+
+    /// As [`ReproducingKernel`] with ã = 2.
+    fn ghost_layers(&self) -> usize {
+        3
+    }
+
+    fn apic_inertia(&self, _cell_size: f64) -> Option<f64> {
+        None
+    }
+
+    fn reproduction_order(&self) -> u32 {
+        1
+    }
+
+    fn tensor_order(&self) -> Option<BSplineOrder> {
+        Some(BSplineOrder::Cubic)
+    }
+
+    fn evaluate(
+        &self,
+        grid: &Grid<D>,
+        x: &Vector<D>,
+        nodes: &mut [usize],
+        values: &mut [f64],
+        gradients: &mut [Vector<D>],
+    ) {
+        self.cubic.evaluate(grid, x, nodes, values, gradients)
     }
 }
 

@@ -208,15 +208,13 @@ fn rk_reproduces_its_order_3d() {
     );
 }
 
-/// METHOD.md section 2: with n = 1 and ã = 2 on a full grid, RK is the cubic B-spline.
+/// METHOD.md section 2: with n = 1 and ã = 2 on a full grid, RK (computed as RK, with its
+/// moment matrix) is the cubic B-spline, which is why `Shape::Rk { order: 1, support: 2.0 }`
+/// builds the B-spline ([`super::LatticeRk1`]).
 #[test]
 fn rk_order_one_support_two_is_the_cubic_bspline() {
-    let rk = Shape::Rk {
-        order: 1,
-        support: 2.0,
-    }
-    .build::<2>()
-    .unwrap();
+    let rk: Box<dyn ShapeFunction<2>> =
+        Box::new(super::ReproducingKernel::<2>::new(1, 2.0).unwrap());
     let bs = Shape::BSpline3.build::<2>().unwrap();
     let mut grid = grid_for(rk.as_ref());
     grid.set_ghost_layers(rk.ghost_layers().max(bs.ghost_layers()))

@@ -245,13 +245,8 @@ impl<const D: usize> Step<'_, D> {
         }
         // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
         //    stored lists. The nodes the last step wrote are cleared meanwhile.
-        let order = match self.options.shape {
-            Shape::Linear => Some(BSplineOrder::Linear),
-            Shape::BSpline2 => Some(BSplineOrder::Quadratic),
-            Shape::BSpline3 => Some(BSplineOrder::Cubic),
-            Shape::Rk { .. } => None,
-        }
-        .filter(|_| self.vc.is_none() && self.fast_paths.factored_stencils);
+        let order = (self.shape.tensor_order())
+            .filter(|_| self.vc.is_none() && self.fast_paths.factored_stencils);
         match order {
             Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
