@@ -26,7 +26,7 @@
 
 // The unsafe operations are defined in two audited places: the parallel node sums' primitives
 // (`grid/shared.rs`, whose header states the one invariant) and the SIMD kernels
-// (`shape::bspline::factors_4`, `shape::stencil`'s `avx2`, `cpu`). The phases call them in
+// (`shape/simd.rs`, entered through `cpu::Lanes`). The phases call them in
 // `unsafe` blocks, each with a `SAFETY:` comment naming the schedule that makes it sound.
 // Miri runs the primitives' tests (`scripts/test-miri.sh`).
 #![deny(unsafe_op_in_unsafe_fn)]

@@ -1,6 +1,6 @@
 //! The parallel node sums' primitives: write access to one grid's node storage from several
-//! threads at once. This file and the SIMD kernels (`shape::bspline::factors_4`,
-//! `shape::stencil::avx2`, `cpu`) are where the engine's `unsafe` code lives.
+//! threads at once. This file and the SIMD kernels (`shape/simd.rs`) are where the engine's
+//! unsafe operations are defined.
 //!
 //! The one invariant every `unsafe` method here rests on, and which its callers state at each
 //! call: **no two threads access the same element at once.** The schedulers provide it:

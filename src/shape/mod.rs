@@ -8,6 +8,8 @@
 mod bspline;
 mod monomials;
 mod rk;
+#[cfg(target_arch = "x86_64")]
+mod simd;
 mod stencil;
 
 pub use bspline::{BSpline, BSplineOrder};

@@ -361,17 +361,17 @@ pub struct TensorStencils<const D: usize, const W: usize> {
 }
 
 /// A particle's stencil as a transfer reads it ([`TensorView::factors`]).
-struct Factors<'a, const D: usize, const W: usize> {
-    base: usize,
-    w: &'a [[f64; W]; D],
-    dw: [[f64; W]; D],
-    offsets: [[f64; W]; D],
+pub(super) struct Factors<'a, const D: usize, const W: usize> {
+    pub(super) base: usize,
+    pub(super) w: &'a [[f64; W]; D],
+    pub(super) dw: [[f64; W]; D],
+    pub(super) offsets: [[f64; W]; D],
 }
 
 /// [`TensorStencils`] as slices and scalars ([`StencilView::Local`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TensorView<'a, const D: usize, const W: usize> {
-    strides: [usize; D],
+    pub(super) strides: [usize; D],
     origin: Vector<D>,
     cell_size: f64,
     first: &'a [[i32; D]],
@@ -553,7 +553,12 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     /// node, the factors, their derivatives (zeros unless `derivatives`) and the offsets
     /// `x_I − x_p` per axis (zeros unless `xp` is given).
     #[inline(always)]
-    fn factors(&self, p: usize, derivatives: bool, xp: Option<&Vector<D>>) -> Factors<'_, D, W> {
+    pub(super) fn factors(
+        &self,
+        p: usize,
+        derivatives: bool,
+        xp: Option<&Vector<D>>,
+    ) -> Factors<'_, D, W> {
         Factors {
             base: self.base(p),
             w: &self.values[p],
@@ -573,7 +578,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     #[inline(always)]
     // An index loop: the iterator form (`zip`, `skip`) compiles to a slower grid to particle.
     #[allow(clippy::needless_range_loop)]
-    fn next_row(&self, k: &mut [usize; D], row: &mut usize) {
+    pub(super) fn next_row(&self, k: &mut [usize; D], row: &mut usize) {
         for a in 1..D {
             k[a] += 1;
             *row += self.strides[a];
@@ -873,12 +878,12 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
         #[cfg(target_arch = "x86_64")]
         if D == 3 && self.lanes.avx2() {
             // SAFETY: with `D == 3` the types are the same; the processor has AVX2 and FMA.
-            return unsafe { avx2::gather_3d(self, p, xp, v, v_old, affine, gradient) };
+            return unsafe { super::simd::gather_3d(self, p, xp, v, v_old, affine, gradient) };
         }
         #[cfg(target_arch = "x86_64")]
         if D == 2 && W <= 4 && self.lanes.avx2() {
             // SAFETY: as above, with `D == 2` and `W ≤ 4`.
-            return unsafe { avx2::gather_2d(self, p, xp, v, v_old, affine, gradient) };
+            return unsafe { super::simd::gather_2d(self, p, xp, v, v_old, affine, gradient) };
         }
         let Factors {
             base,
@@ -977,310 +982,5 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
             r /= W;
             self.origin[a] + (i64::from(first[a]) + k) as f64 * self.cell_size - xp[a]
         })
-    }
-}
-
-/// The 3D gather with each 3-vector in one AVX2 register (`x, y, z, 0`). The compiler takes the
-/// 3-vectors of the portable gather a component or two at a time and spills its sums; here
-/// every sum is one register. Lane by lane the same multiplications and additions in the same
-/// order (no fused multiply-add), so the same bits as the portable gather
-/// (`results_do_not_depend_on_the_instruction_set` checks it).
-///
-/// The functions are `#[inline(always)]` and not `#[target_feature]` (which cannot be): inlined
-/// into the body [`crate::cpu::Lanes::wide`] compiles for AVX2, the intrinsics become AVX2
-/// instructions there (out of line, behind a `#[target_feature]` call, most of the gain is
-/// lost). The caller takes this path only when `Lanes::avx2()`.
-///
-/// The 2D gather (`gather_2d`) puts two nodes of a row in one register.
-#[cfg(target_arch = "x86_64")]
-mod avx2 {
-    use super::{Factors, Gathered, TensorView};
-    use crate::{Matrix, Vector};
-    use std::arch::x86_64::*;
-
-    /// `s + a x`, lane by lane.
-    #[inline(always)]
-    unsafe fn add_scaled(s: __m256d, a: f64, x: __m256d) -> __m256d {
-        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
-        // processor has AVX2 and FMA.
-        unsafe { _mm256_add_pd(s, _mm256_mul_pd(_mm256_set1_pd(a), x)) }
-    }
-
-    /// The three components of `v[n]` and a zero (`n < v.len()`, checked by the caller).
-    #[inline(always)]
-    unsafe fn load(v: &[Vector<3>], n: usize) -> __m256d {
-        // SAFETY: the kernels pass an index `n` of `v` (a node of the stencil), so the three
-        // unmasked lanes read `v[n]` alone (the fourth is masked off); the processor has AVX2,
-        // as for the helpers above.
-        unsafe {
-            let mask = _mm256_set_epi64x(0, -1, -1, -1);
-            _mm256_maskload_pd(v.as_ptr().add(n) as *const f64, mask)
-        }
-    }
-
-    #[inline(always)]
-    unsafe fn vector(x: __m256d) -> Vector<3> {
-        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
-        // processor has AVX2 and FMA.
-        unsafe {
-            let mut l = [0.0; 4];
-            _mm256_storeu_pd(l.as_mut_ptr(), x);
-            Vector::<3>::new(l[0], l[1], l[2])
-        }
-    }
-
-    /// [`StencilView::gather`](super::StencilView::gather) of a 3D view, as the portable one.
-    ///
-    /// # Safety
-    /// The processor has AVX2 and FMA (`D == 3` is asserted).
-    #[allow(clippy::too_many_arguments, clippy::needless_range_loop)]
-    #[inline(always)]
-    pub(super) unsafe fn gather_3d<const D: usize, const W: usize>(
-        view: &TensorView<'_, D, W>,
-        p: usize,
-        xp: &Vector<D>,
-        v: &[Vector<D>],
-        v_old: Option<&[Vector<D>]>,
-        affine: bool,
-        gradient: bool,
-    ) -> Gathered<D> {
-        // SAFETY: the caller keeps the contract above (AVX2 and FMA present); the loads read
-        // node velocities at indices of the stencil, which lie inside the node arrays.
-        unsafe {
-            assert_eq!(D, 3);
-            // SAFETY (of the casts): `D == 3`, so each is the same type.
-            let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 3, W>);
-            let xp = &*(xp as *const Vector<D> as *const Vector<3>);
-            let cast = |v: &[Vector<D>]| {
-                std::slice::from_raw_parts(v.as_ptr() as *const Vector<3>, v.len())
-            };
-            let (v, v_old) = (cast(v), v_old.map(cast));
-            let Factors {
-                base,
-                w,
-                dw,
-                offsets,
-            } = view.factors(p, gradient, affine.then_some(xp));
-            let offset = |a: usize, k: usize| offsets[a][k];
-            let off0 = offsets[0];
-            let (zero, minus0) = (_mm256_setzero_pd(), _mm256_set1_pd(-0.0));
-            let (mut velocity, mut velocity_change) = (zero, zero);
-            let (mut gradient_sum, mut affine_sum) = ([zero; 3], [zero; 3]);
-            let mut k = [0usize; 3];
-            let mut row = base;
-            for _ in 0..W * W {
-                assert!(row + W <= v.len() && v_old.is_none_or(|o| row + W <= o.len()));
-                // From −0, as the portable gather.
-                let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (minus0, minus0, minus0, minus0);
-                for k0 in 0..W {
-                    let vi = load(v, row + k0);
-                    let (wk, dwk) = (w[0][k0], dw[0][k0]);
-                    s_w = add_scaled(s_w, wk, vi);
-                    if gradient {
-                        s_dw = add_scaled(s_dw, dwk, vi);
-                    }
-                    if affine {
-                        s_wo = add_scaled(s_wo, wk * off0[k0], vi);
-                    }
-                    if let Some(v_old) = v_old {
-                        let dv = _mm256_sub_pd(vi, load(v_old, row + k0));
-                        s_dv = add_scaled(s_dv, wk, dv);
-                    }
-                }
-                let mut c = 1.0;
-                for a in 1..3 {
-                    c *= w[a][k[a]];
-                }
-                velocity = add_scaled(velocity, c, s_w);
-                if v_old.is_some() {
-                    velocity_change = add_scaled(velocity_change, c, s_dv);
-                }
-                if gradient {
-                    gradient_sum[0] = add_scaled(gradient_sum[0], c, s_dw);
-                }
-                if affine {
-                    affine_sum[0] = add_scaled(affine_sum[0], c, s_wo);
-                }
-                for a in 1..3 {
-                    if gradient {
-                        let mut c_a = 1.0;
-                        for b in 1..3 {
-                            c_a *= if a == b { dw[b][k[b]] } else { w[b][k[b]] };
-                        }
-                        gradient_sum[a] = add_scaled(gradient_sum[a], c_a, s_w);
-                    }
-                    if affine {
-                        affine_sum[a] = add_scaled(affine_sum[a], c * offset(a, k[a]), s_w);
-                    }
-                }
-                view.next_row(&mut k, &mut row);
-            }
-            let columns = |sums: [__m256d; 3]| {
-                let c = sums.map(|x| vector(x));
-                Matrix::<3>::from_columns(&c)
-            };
-            let g = Gathered::<3> {
-                velocity: vector(velocity),
-                velocity_change: vector(velocity_change),
-                affine: columns(affine_sum),
-                gradient: columns(gradient_sum),
-            };
-            std::mem::transmute_copy(&g)
-        }
-    }
-
-    /// `lo + hi` of the two nodes of a pair, after the sum `s` of the nodes before them.
-    #[inline(always)]
-    unsafe fn add_pair(s: Option<__m128d>, pair: __m256d) -> __m128d {
-        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
-        // processor has AVX2 and FMA.
-        unsafe {
-            let (lo, hi) = (
-                _mm256_castpd256_pd128(pair),
-                _mm256_extractf128_pd::<1>(pair),
-            );
-            match s {
-                Some(s) => _mm_add_pd(_mm_add_pd(s, lo), hi),
-                None => _mm_add_pd(lo, hi),
-            }
-        }
-    }
-
-    /// `s + a x`, lane by lane.
-    #[inline(always)]
-    unsafe fn add_scaled_2(s: __m128d, a: f64, x: __m128d) -> __m128d {
-        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
-        // processor has AVX2 and FMA.
-        unsafe { _mm_add_pd(s, _mm_mul_pd(_mm_set1_pd(a), x)) }
-    }
-
-    #[inline(always)]
-    unsafe fn vector_2(x: __m128d) -> Vector<2> {
-        // SAFETY: only this module's AVX2 kernels call this, inside `Lanes::wide`: the
-        // processor has AVX2 and FMA.
-        unsafe {
-            let mut l = [0.0; 2];
-            _mm_storeu_pd(l.as_mut_ptr(), x);
-            Vector::<2>::new(l[0], l[1])
-        }
-    }
-
-    /// [`StencilView::gather`](super::StencilView::gather) of a 2D view (`W ≤ 4`), as the
-    /// portable one. Two nodes of a row (two 2-vectors) share a register: their products with
-    /// the axis-0 factors `[w_k, w_k, w_{k+1}, w_{k+1}]` are taken at once, and the row sum adds
-    /// them in node order, `((w_0 v_0 + w_1 v_1) + w_2 v_2) + …`, which is the portable sum
-    /// from −0. The rows are weighted and added as the portable gather does, in 2-vectors.
-    ///
-    /// # Safety
-    /// The processor has AVX2 and FMA (`D == 2` and `W ≤ 4` are asserted).
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub(super) unsafe fn gather_2d<const D: usize, const W: usize>(
-        view: &TensorView<'_, D, W>,
-        p: usize,
-        xp: &Vector<D>,
-        v: &[Vector<D>],
-        v_old: Option<&[Vector<D>]>,
-        affine: bool,
-        gradient: bool,
-    ) -> Gathered<D> {
-        // SAFETY: the caller keeps the contract above (AVX2 and FMA present); the loads read
-        // node velocities at indices of the stencil, which lie inside the node arrays.
-        unsafe {
-            assert!(D == 2 && (2..=4).contains(&W));
-            // SAFETY (of the casts): `D == 2`, so each is the same type.
-            let view = &*(view as *const TensorView<'_, D, W> as *const TensorView<'_, 2, W>);
-            let xp = &*(xp as *const Vector<D> as *const Vector<2>);
-            let cast =
-                |v: &[Vector<D>]| std::slice::from_raw_parts(v.as_ptr() as *const f64, 2 * v.len());
-            let (v, v_old) = (cast(v), v_old.map(cast));
-            let Factors {
-                base,
-                w,
-                dw,
-                offsets,
-            } = view.factors(p, gradient, affine.then_some(xp));
-            // The axis-0 factors of the pairs of nodes and of the last node when `W` is odd.
-            let wo: [f64; W] = std::array::from_fn(|k| w[0][k] * offsets[0][k]);
-            let pair = |f: &[f64; W], j: usize| {
-                _mm256_set_pd(f[2 * j + 1], f[2 * j + 1], f[2 * j], f[2 * j])
-            };
-            let zero = _mm256_setzero_pd();
-            let (mut w_pair, mut dw_pair, mut wo_pair) = ([zero; 2], [zero; 2], [zero; 2]);
-            for j in 0..W / 2 {
-                w_pair[j] = pair(&w[0], j);
-                dw_pair[j] = pair(&dw[0], j);
-                wo_pair[j] = pair(&wo, j);
-            }
-            let odd = W % 2 == 1;
-            let single = |f: &[f64; W]| _mm_set1_pd(f[W - 1]);
-            let (w_last, dw_last, wo_last) = (single(&w[0]), single(&dw[0]), single(&wo));
-            let zero = _mm_setzero_pd();
-            let (mut velocity, mut velocity_change) = (zero, zero);
-            let (mut gradient_sum, mut affine_sum) = ([zero; 2], [zero; 2]);
-            let mut row = base;
-            for k1 in 0..W {
-                assert!(2 * (row + W) <= v.len() && v_old.is_none_or(|o| 2 * (row + W) <= o.len()));
-                let (mut s_w, mut s_dw, mut s_wo, mut s_dv) = (None, None, None, None);
-                for j in 0..W / 2 {
-                    let at = 2 * (row + 2 * j);
-                    let vj = _mm256_loadu_pd(v.as_ptr().add(at));
-                    s_w = Some(add_pair(s_w, _mm256_mul_pd(w_pair[j], vj)));
-                    if gradient {
-                        s_dw = Some(add_pair(s_dw, _mm256_mul_pd(dw_pair[j], vj)));
-                    }
-                    if affine {
-                        s_wo = Some(add_pair(s_wo, _mm256_mul_pd(wo_pair[j], vj)));
-                    }
-                    if let Some(v_old) = v_old {
-                        let dv = _mm256_sub_pd(vj, _mm256_loadu_pd(v_old.as_ptr().add(at)));
-                        s_dv = Some(add_pair(s_dv, _mm256_mul_pd(w_pair[j], dv)));
-                    }
-                }
-                if odd {
-                    let at = 2 * (row + W - 1);
-                    let vl = _mm_loadu_pd(v.as_ptr().add(at));
-                    // `W ≥ 3` here, so every sum has its first pair.
-                    let add = |s: Option<__m128d>, f: __m128d, x: __m128d| {
-                        Some(_mm_add_pd(s.unwrap(), _mm_mul_pd(f, x)))
-                    };
-                    s_w = add(s_w, w_last, vl);
-                    if gradient {
-                        s_dw = add(s_dw, dw_last, vl);
-                    }
-                    if affine {
-                        s_wo = add(s_wo, wo_last, vl);
-                    }
-                    if let Some(v_old) = v_old {
-                        let dv = _mm_sub_pd(vl, _mm_loadu_pd(v_old.as_ptr().add(at)));
-                        s_dv = add(s_dv, w_last, dv);
-                    }
-                }
-                let s_w = s_w.unwrap();
-                let c = w[1][k1];
-                velocity = add_scaled_2(velocity, c, s_w);
-                if let Some(s_dv) = s_dv {
-                    velocity_change = add_scaled_2(velocity_change, c, s_dv);
-                }
-                if let Some(s_dw) = s_dw {
-                    gradient_sum[0] = add_scaled_2(gradient_sum[0], c, s_dw);
-                    gradient_sum[1] = add_scaled_2(gradient_sum[1], dw[1][k1], s_w);
-                }
-                if let Some(s_wo) = s_wo {
-                    affine_sum[0] = add_scaled_2(affine_sum[0], c, s_wo);
-                    affine_sum[1] = add_scaled_2(affine_sum[1], c * offsets[1][k1], s_w);
-                }
-                row += view.strides[1];
-            }
-            let columns =
-                |sums: [__m128d; 2]| Matrix::<2>::from_columns(&sums.map(|x| vector_2(x)));
-            let g = Gathered::<2> {
-                velocity: vector_2(velocity),
-                velocity_change: vector_2(velocity_change),
-                affine: columns(affine_sum),
-                gradient: columns(gradient_sum),
-            };
-            std::mem::transmute_copy(&g)
-        }
     }
 }
