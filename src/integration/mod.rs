@@ -44,6 +44,7 @@
 //! The corrected gradient is used in the internal force only (METHOD.md section 7).
 
 pub mod boundary_points;
+mod node_operator;
 
 pub use boundary_points::BoundaryPoints;
 
@@ -52,6 +53,7 @@ use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, StencilNode, Stencils};
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
+use node_operator::NodeOperator;
 use rayon::prelude::*;
 
 /// A node's order-`n` correction needs its particle moment matrix `A_I = Σ V_p Q Qᵀ` to be well
@@ -101,6 +103,9 @@ pub struct VcCorrection<const D: usize> {
     mean: Vec<Vector<D>>,
     /// Conjugate-gradient iterations of the last solve.
     iterations: usize,
+    /// Applies the order-1 system matrix-free, as orders ≥ 2 do (to test the assembled one).
+    #[cfg(test)]
+    matrix_free: bool,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -120,6 +125,8 @@ impl<const D: usize> VcCorrection<D> {
             reduced: Vec::new(),
             mean: Vec::new(),
             iterations: 0,
+            #[cfg(test)]
+            matrix_free: false,
         })
     }
 
@@ -359,8 +366,16 @@ impl<const D: usize> VcCorrection<D> {
         let mut mean = std::mem::take(&mut self.mean);
         mean.clear();
         mean.resize(positions.len(), Vector::<D>::zeros());
-        // K ζ: the means of ζ at the particles, then the node sums.
-        let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
+        // At order 1, K assembled on the nodes once (see `node_operator`).
+        #[cfg(not(test))]
+        let assembled = m == 1;
+        #[cfg(test)]
+        let assembled = m == 1 && !self.matrix_free;
+        let operator = assembled
+            .then(|| NodeOperator::assemble(grid, bins, stencils, nodes, volumes, moment, counted))
+            .flatten();
+        // The means of ζ at the particles.
+        let means = |zeta: &[f64], mean: &mut [Vector<D>]| {
             mean.par_iter_mut().enumerate().for_each(|(p, mu)| {
                 *mu = Vector::<D>::zeros();
                 if !counted(p) {
@@ -384,6 +399,14 @@ impl<const D: usize> VcCorrection<D> {
                     *mu /= weight;
                 }
             });
+        };
+        // K ζ: assembled, or the means of ζ at the particles, then the node sums.
+        let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
+            if let Some(operator) = &operator {
+                operator.apply::<D>(zeta, out);
+                return;
+            }
+            means(zeta, mean);
             out.par_chunks_exact_mut(m * D)
                 .zip(zeta.par_chunks_exact(m * D))
                 .enumerate()
@@ -516,7 +539,7 @@ impl<const D: usize> VcCorrection<D> {
             });
         }
         // The particle means of the solution, which the corrected gradients subtract.
-        apply(&zeta, &mut kd, &mut mean);
+        means(&zeta, &mut mean);
         self.mean = mean;
         self.xi = zeta;
     }
