@@ -23,8 +23,11 @@
 //! floor is needed). The equalities then couple the nodes through `μ_p`:
 //! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p`, `A_I = Σ_p V_p w_Ip Q Qᵀ`,
 //! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
-//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
-//! node blocks `A_I`, whose first iterate is the per-node correction. `K`'s null space is the
+//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients. At order 1 `K` is
+//! assembled on the nodes once per step and preconditioned by an aggregation multigrid V-cycle
+//! (`node_operator`): about a dozen iterations whatever the grid. At higher orders it is applied
+//! matrix-free and preconditioned with the node blocks `A_I`, whose first iterate is the
+//! per-node correction; the iterations then grow with the grid's width. `K`'s null space is the
 //! corrections that change no gradient (a polynomial of degree < n over a whole body); the
 //! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
 //! body at order 1, zero for a closed surface. It is projected out per connected body before
@@ -53,7 +56,7 @@ use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, StencilNode, Stencils};
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
-use node_operator::NodeOperator;
+use node_operator::{Multilevel, NodeOperator};
 use rayon::prelude::*;
 
 /// A node's order-`n` correction needs its particle moment matrix `A_I = Σ V_p Q Qᵀ` to be well
@@ -106,6 +109,9 @@ pub struct VcCorrection<const D: usize> {
     /// Applies the order-1 system matrix-free, as orders ≥ 2 do (to test the assembled one).
     #[cfg(test)]
     matrix_free: bool,
+    /// Preconditions the order-1 system with the V-cycle whatever the grid's size.
+    #[cfg(test)]
+    multilevel: bool,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -127,6 +133,8 @@ impl<const D: usize> VcCorrection<D> {
             iterations: 0,
             #[cfg(test)]
             matrix_free: false,
+            #[cfg(test)]
+            multilevel: false,
         })
     }
 
@@ -271,8 +279,13 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 let n = ns[s];
                 let slot = nodes.slot(n);
-                let z = (boundary.position[b] - grid.node_position(grid.node_multi_index(n))) / h;
-                self.basis_at(&z, &mut q, None);
+                if m == 1 {
+                    // Order 1: Q = 1 (no position needed).
+                    q[0] = 1.0;
+                } else {
+                    let x_node = grid.node_position(grid.node_multi_index(n));
+                    self.basis_at(&((boundary.position[b] - x_node) / h), &mut q, None);
+                }
                 let r = &mut self.xi[slot * m * D..(slot + 1) * m * D];
                 for k in 0..D {
                     for j in 0..m {
@@ -328,9 +341,31 @@ impl<const D: usize> VcCorrection<D> {
                 chol
             })
             .collect();
+        // At order 1, K assembled on the nodes once and, on a grid wide enough for it to pay,
+        // preconditioned by a V-cycle (see `node_operator`).
+        #[cfg(not(test))]
+        let (assembled, force_cycle) = (m == 1, false);
+        #[cfg(test)]
+        let (assembled, force_cycle) = (m == 1 && !self.matrix_free, self.multilevel);
         let moment = &self.moment;
         let used = &self.used;
+        let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
+        let multilevel = assembled
+            .then(|| NodeOperator::assemble(grid, bins, stencils, nodes, volumes, moment, counted))
+            .flatten()
+            .map(|fine| {
+                let cycle = force_cycle || Multilevel::<D>::pays(&fine);
+                Multilevel::new(fine, cycle)
+            });
+        let operator = multilevel.as_ref().map(|m| m.fine());
+        // The V-cycle, until a breakdown (below) turns to the node blocks.
+        let with_multilevel =
+            std::cell::Cell::new(multilevel.as_ref().is_some_and(|m| m.has_cycle()));
         let precondition = |r: &[f64], z: &mut [f64]| {
+            if let Some(multilevel) = multilevel.as_ref().filter(|_| with_multilevel.get()) {
+                multilevel.precondition(r, z);
+                return;
+            }
             z.par_chunks_exact_mut(m * D)
                 .zip(r.par_chunks_exact(m * D))
                 .enumerate()
@@ -352,7 +387,6 @@ impl<const D: usize> VcCorrection<D> {
         };
         // Per particle: how many nodes its support holds (the mean's divisor).
         let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
-        let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
         let h = grid.cell_size;
         let basis = &self.basis;
         let q_of = |p: usize, n: usize, q: &mut [f64]| {
@@ -366,14 +400,6 @@ impl<const D: usize> VcCorrection<D> {
         let mut mean = std::mem::take(&mut self.mean);
         mean.clear();
         mean.resize(positions.len(), Vector::<D>::zeros());
-        // At order 1, K assembled on the nodes once (see `node_operator`).
-        #[cfg(not(test))]
-        let assembled = m == 1;
-        #[cfg(test)]
-        let assembled = m == 1 && !self.matrix_free;
-        let operator = assembled
-            .then(|| NodeOperator::assemble(grid, bins, stencils, nodes, volumes, moment, counted))
-            .flatten();
         // The means of ζ at the particles.
         let means = |zeta: &[f64], mean: &mut [Vector<D>]| {
             mean.par_iter_mut().enumerate().for_each(|(p, mu)| {
@@ -403,7 +429,7 @@ impl<const D: usize> VcCorrection<D> {
         // K ζ: assembled, or the means of ζ at the particles, then the node sums.
         let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
             if let Some(operator) = &operator {
-                operator.apply::<D>(zeta, out);
+                operator.apply(zeta, out);
                 return;
             }
             means(zeta, mean);
@@ -484,7 +510,7 @@ impl<const D: usize> VcCorrection<D> {
         let mut d = z.clone();
         let mut kd = vec![0.0; len];
         let mut rz = dot(&r, &z);
-        let target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * rz;
+        let mut target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * rz;
         let (mut best, mut best_rz) = (zeta.clone(), rz);
         let (mut iterations, mut restarts) = (0, 0);
         while rz > target && iterations < VC_SOLVE_MAX_ITERATIONS {
@@ -501,6 +527,15 @@ impl<const D: usize> VcCorrection<D> {
                     .zip(&rhs)
                     .zip(&kd)
                     .for_each(|((r, b), kz)| *r = b - kz);
+                if with_multilevel.replace(false) {
+                    // The V-cycle brings the near-null directions of nodes that particles
+                    // barely reach into the search directions, whose curvature round-off then
+                    // swamps; the node blocks do not. Their norm measures from here on.
+                    precondition(&rhs, &mut z);
+                    target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * dot(&rhs, &z);
+                    precondition(&r, &mut z);
+                    best_rz = dot(&r, &z);
+                }
                 precondition(&r, &mut z);
                 d.copy_from_slice(&z);
                 rz = dot(&r, &z);

@@ -12,15 +12,26 @@ use crate::{Matrix, Wall};
 /// A box body `[0.3, 0.7]^D` on a grid of spacing 0.1, 2 particles per cell per direction
 /// jittered by up to ±`jitter` of their sub-cell, and boundary points at the lattice face centres.
 fn jittered_box<const D: usize>(shape: Shape, order: Option<u32>, jitter: f64) -> Sim<D> {
-    let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [10; D], 0.1).unwrap();
+    jittered_box_on(10, shape, order, jitter)
+}
+
+/// [`jittered_box`] on a unit grid of `cells` cells per direction (a multiple of 5).
+fn jittered_box_on<const D: usize>(
+    cells: usize,
+    shape: Shape,
+    order: Option<u32>,
+    jitter: f64,
+) -> Sim<D> {
+    let h = 1.0 / cells as f64;
+    let mut sim = Sim::<D>::new(Vector::<D>::zeros(), [cells; D], h).unwrap();
     sim.set_shape(shape).unwrap();
     sim.set_transfer(Transfer::PicFlip { flip: 0.0 }).unwrap();
     if let Some(order) = order {
         sim.set_integration(Integration::Vc { order }).unwrap();
     }
     let m = sim.add_material(Material::linear_elastic(1000.0, 1e6, 0.25).unwrap());
-    let s = 0.05;
-    let n = 8usize;
+    let s = h / 2.0;
+    let n = cells * 4 / 5;
     let mut rng = TestRng::new(5);
     let mut lattice = Vec::new();
     let mut x = Vec::new();
@@ -59,6 +70,17 @@ fn prepare_stencils<const D: usize>(
     (grid, ps, volumes)
 }
 
+/// How the order-1 system is solved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Solve {
+    /// As the step does: assembled, with the V-cycle on grids wide enough for it to pay.
+    Auto,
+    /// Matrix-free with the node blocks, as orders ≥ 2 are.
+    MatrixFree,
+    /// Assembled, with the V-cycle on any grid.
+    Multilevel,
+}
+
 /// The VC correction of order `order` for the stencils [`prepare_stencils`] computed.
 fn correction<const D: usize>(
     sim: &mut Sim<D>,
@@ -66,11 +88,12 @@ fn correction<const D: usize>(
     ps: &crate::particles::Particles<D>,
     volumes: &[f64],
     order: u32,
-    matrix_free: bool,
+    solve: Solve,
 ) -> VcCorrection<D> {
     let work = &mut sim.work;
     let mut vc = VcCorrection::<D>::new(order).unwrap();
-    vc.matrix_free = matrix_free;
+    vc.matrix_free = solve == Solve::MatrixFree;
+    vc.multilevel = solve == Solve::Multilevel;
     vc.compute(
         grid,
         &work.bins,
@@ -89,7 +112,7 @@ fn correction<const D: usize>(
 /// monomial `Q` of degree < `order`, largest absolute value.
 fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, order: u32) -> f64 {
     let (grid, ps, volumes) = prepare_stencils(sim);
-    let vc = vc_order.map(|o| correction(sim, &grid, &ps, &volumes, o, false));
+    let vc = vc_order.map(|o| correction(sim, &grid, &ps, &volumes, o, Solve::Auto));
     let work = &mut sim.work;
     let q_basis = VcCorrection::<D>::new(order).unwrap();
     let m = q_basis.m();
@@ -203,12 +226,12 @@ fn first_order_divergence_equality() {
 /// conditioning.
 #[test]
 fn assembled_first_order_system_matches_the_matrix_free_one() {
-    fn corrections<const D: usize>(shape: Shape, matrix_free: bool) -> Vec<Vector<D>> {
+    fn corrections<const D: usize>(shape: Shape, solve: Solve) -> Vec<Vector<D>> {
         let mut sim = jittered_box::<D>(shape, Some(1), 0.4);
         let (grid, ps, volumes) = prepare_stencils(&mut sim);
-        let vc = correction(&mut sim, &grid, &ps, &volumes, 1, matrix_free);
+        let vc = correction(&mut sim, &grid, &ps, &volumes, 1, solve);
         let work = &sim.work;
-        assert!(vc.iterations > 2, "{D}D: {} iterations", vc.iterations);
+        assert!(vc.iterations > 0, "{D}D: a solve that iterates");
         let mut out = Vec::new();
         for p in 0..ps.len() {
             let (ns, ws, _) = work.stencils.of(p);
@@ -225,39 +248,79 @@ fn assembled_first_order_system_matches_the_matrix_free_one() {
         }
         out
     }
-    fn compare<const D: usize>(shape: Shape) {
-        let (a, b) = (
-            corrections::<D>(shape, false),
-            corrections::<D>(shape, true),
-        );
+    fn compare<const D: usize>(shape: Shape, tolerance: f64) {
+        let b = corrections::<D>(shape, Solve::MatrixFree);
         let largest = b.iter().fold(0.0f64, |m, g| m.max(g.norm()));
-        let diff = a
-            .iter()
-            .zip(&b)
-            .fold(0.0f64, |m, (x, y)| m.max((x - y).norm()));
         assert!(
             largest > 1e-2,
             "{shape:?} {D}D: corrections of size {largest:e}"
         );
-        assert!(
-            diff <= 1e-9 * largest,
-            "{shape:?} {D}D: assembled and matrix-free differ by {diff:e} of {largest:e}"
-        );
+        for solve in [Solve::Auto, Solve::Multilevel] {
+            let a = corrections::<D>(shape, solve);
+            let diff = a
+                .iter()
+                .zip(&b)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).norm()));
+            assert!(
+                diff <= tolerance * largest,
+                "{shape:?} {D}D {solve:?}: differs from matrix-free by {diff:e} of {largest:e}"
+            );
+        }
     }
-    for shape in [
-        Shape::BSpline2,
-        Shape::Rk {
-            order: 1,
-            support: 2.0,
-        },
-        Shape::Rk {
-            order: 1,
-            support: 2.5,
-        },
+    // With support 2.5 some edge nodes' coefficients reach the order-1 bound
+    // (`VC_MAX_CORRECTION`; both solves then leave a residual of 3.7e-7 in the 2D box's
+    // equalities, 5e-15 without the bound): the bound cuts two solutions that differ along the
+    // system's near-null directions, and their corrections differ by 8e-6 of the largest.
+    for (shape, tolerance) in [
+        (Shape::BSpline2, 1e-9),
+        (
+            Shape::Rk {
+                order: 1,
+                support: 2.0,
+            },
+            1e-9,
+        ),
+        (
+            Shape::Rk {
+                order: 1,
+                support: 2.5,
+            },
+            1e-4,
+        ),
     ] {
-        compare::<2>(shape);
-        compare::<3>(shape);
+        compare::<2>(shape, tolerance);
+        compare::<3>(shape, tolerance);
     }
+}
+
+/// The order-1 solve's iterations do not grow with the grid (the multilevel preconditioner of
+/// `node_operator`), where with the node blocks alone (the matrix-free path) they grow about
+/// with its width. 2D, quadratic B-spline, particles jittered by ±30 %.
+#[test]
+fn first_order_solve_iterations_do_not_grow_with_the_grid() {
+    let iterations = |cells: usize, solve: Solve| {
+        let mut sim = jittered_box_on::<2>(cells, Shape::BSpline2, Some(1), 0.3);
+        let (grid, ps, volumes) = prepare_stencils(&mut sim);
+        correction(&mut sim, &grid, &ps, &volumes, 1, solve).iterations
+    };
+    // At 80 cells the V-cycle has two levels below the nodes, at 160 three (below 40 cells
+    // the coarsest level is the nodes', solved directly).
+    let (coarse, fine) = (
+        iterations(80, Solve::Multilevel),
+        iterations(160, Solve::Multilevel),
+    );
+    let (coarse_blocks, fine_blocks) = (
+        iterations(20, Solve::MatrixFree),
+        iterations(160, Solve::MatrixFree),
+    );
+    assert!(
+        fine <= coarse + coarse / 2 + 2 && fine <= 20,
+        "multilevel: {coarse} iterations at 80 cells, {fine} at 160"
+    );
+    assert!(
+        fine_blocks >= 3 * coarse_blocks && fine_blocks >= 5 * fine,
+        "node blocks: {coarse_blocks} iterations at 20 cells, {fine_blocks} at 160"
+    );
 }
 
 /// Order-2 VC satisfies the order-2 constraints (Q = 1, x, y[, z]) to round-off; order 1 does
