@@ -23,11 +23,11 @@
 //! floor is needed). The equalities then couple the nodes through `μ_p`:
 //! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p`, `A_I = Σ_p V_p w_Ip Q Qᵀ`,
 //! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
-//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients. At order 1 `K` is
-//! assembled on the nodes once per step and preconditioned by an aggregation multigrid V-cycle
-//! (`node_operator`): about a dozen iterations whatever the grid. At higher orders it is applied
-//! matrix-free and preconditioned with the node blocks `A_I`, whose first iterate is the
-//! per-node correction; the iterations then grow with the grid's width. `K`'s null space is the
+//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
+//! node blocks `A_I`, whose first iterate is the per-node correction; the iterations grow with
+//! the grid's width. At order 1 `K` is assembled on the nodes once per step, and on grids at
+//! least 48 nodes wide preconditioned by an aggregation multigrid V-cycle instead
+//! (`node_operator`): about a dozen iterations whatever the grid. `K`'s null space is the
 //! corrections that change no gradient (a polynomial of degree < n over a whole body); the
 //! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
 //! body at order 1, zero for a closed surface. It is projected out per connected body before

@@ -10,7 +10,8 @@
 //! takes a gather and a scatter over every particle's stencil per conjugate-gradient iteration;
 //! assembled once per step (one pass over the particles' stencil pairs), an iteration costs a
 //! product with a sparse matrix of `(2w − 1)^D` entries per node, `w` nodes per axis of a
-//! stencil: a few per particle instead of two stencil passes.
+//! stencil: a few per particle instead of two stencil passes. On wide grids [`Multilevel`]
+//! preconditions it, so that the iterations stop growing with the grid's width.
 
 use crate::grid::{Bins, Grid, GridNodes, SharedSlice};
 use crate::shape::Stencils;
