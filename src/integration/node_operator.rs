@@ -426,38 +426,24 @@ impl<const D: usize> Multilevel<D> {
                 1.0
             };
         }
-        // The bodies: rows joined by an entry.
-        let mut root: Vec<usize> = (0..n).collect();
-        fn find(root: &mut [usize], mut i: usize) -> usize {
-            while root[i] != i {
-                root[i] = root[root[i]];
-                i = root[i];
-            }
-            i
-        }
-        for i in 0..n {
+        // The bodies: rows joined by an entry (rows without particles in none).
+        let numbers = super::bodies(n, n, |i, visit: &mut dyn FnMut(usize)| {
+            visit(i);
             let start = i * last.block;
             for e in 0..last.count[i] as usize {
-                let j = last.column[start + e] as usize;
                 if last.value[start + e] != 0.0 {
-                    let (a, b) = (find(&mut root, i), find(&mut root, j));
-                    root[a.max(b)] = a.min(b);
+                    visit(last.column[start + e] as usize);
                 }
             }
-        }
-        let mut number = vec![usize::MAX; n];
-        let mut bodies = 0;
+        });
+        let bodies = numbers.iter().max().map_or(0, |&b| b + 1);
         let body = (0..n)
             .map(|i| {
-                if last.diagonal[i] <= 0.0 {
-                    return usize::MAX;
+                if last.diagonal[i] > 0.0 {
+                    numbers[i]
+                } else {
+                    usize::MAX
                 }
-                let r = find(&mut root, i);
-                if number[r] == usize::MAX {
-                    number[r] = bodies;
-                    bodies += 1;
-                }
-                number[r]
             })
             .collect();
         Multilevel {
