@@ -4,16 +4,23 @@
 //! `fast_step_matches_the_reference_step`): both must give the same particle state to round-off.
 //!
 //! It covers what the fast step does for nonnegative shape functions (linear hats, B-splines, RK
-//! of order 1) under material-point integration, one velocity field and gravity: every transfer
-//! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material. The wall
-//! conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`) and the stresses
-//! the materials' own: the oracle is for the schedule and the data layout, not for those.
+//! of order 1) with one velocity field and gravity: every transfer (PIC/FLIP, APIC, MLS), both
+//! schemes (USL, MUSL), every kind of wall, every material, material-point integration and VC of
+//! order 1 over the surface found from the particles. The wall conditions are the walls' own
+//! (`Walls::fold`, `apply_friction`, `unfold`), the stresses the materials' own and the found
+//! surface `BoundaryPoints::of_particles`'s: the oracle is for the schedule, the data layout and
+//! VC's solve, not for those. VC's correction is solved here densely (a Cholesky factor of the
+//! node system with its null space added), where the fast step runs preconditioned conjugate
+//! gradients.
 
 use crate::grid::{Grid, GridNodes};
+use crate::integration::VC_MAX_CORRECTION;
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::options::{Shape, Transfer};
 use crate::sim::Sim;
 use crate::{Matrix, Vector};
+use nalgebra::{DMatrix, DVector};
+use std::collections::BTreeMap;
 
 /// A particle's stencil: node indices, `Ψ_I(x_p)` and `∇Ψ_I(x_p)`.
 struct Stencil<const D: usize> {
@@ -38,17 +45,170 @@ fn node_position<const D: usize>(grid: &Grid<D>, n: usize) -> Vector<D> {
     grid.node_position(grid.node_multi_index(n))
 }
 
+/// Whether the `k`-th node of a stencil is in the particle's support.
+fn in_support<const D: usize>(s: &Stencil<D>, k: usize) -> bool {
+    s.values[k] != 0.0 || s.gradients[k] != Vector::<D>::zeros()
+}
+
+/// VC of order 1 (`crate::integration`): per particle and stencil node the correction
+/// `|Ψ_I| (ζ_I − μ_p)` of `∇Ψ_I(x_p)`, `μ_p = Σ_J |Ψ_J| ζ_J / Σ_J |Ψ_J|`, with `ζ` such that
+/// `Σ_p V_p ∇̂Ψ_I = Σ_b Ψ_I(x_b) n_b a_b` at every node: `K ζ = B − Σ_p V_p ∇Ψ_I`,
+/// `K_IJ = δ_IJ A_I − Σ_p V_p |Ψ_I| |Ψ_J| / W_p`, `A_I = Σ_p V_p |Ψ_I|`, `W_p = Σ_J |Ψ_J|`.
+/// The right-hand side loses its mean over each connected body's nodes (`K`'s null space), and
+/// `ζ` is the solution of least `Σ_I A_I |ζ_I|²` (where the fast step's conjugate gradients,
+/// preconditioned with `A_I` and started from zero, converge), then bounded by
+/// `VC_MAX_CORRECTION / h`.
+fn vc_corrections<const D: usize>(
+    sim: &Sim<D>,
+    stencils: &[Stencil<D>],
+) -> crate::Result<Vec<Vec<Vector<D>>>> {
+    let ps = &sim.particles;
+    let surface = super::surface::found_surface(&sim.grid, ps, None)?;
+    // A row per node of the particles' supports (a node that only boundary points reach has no
+    // particle to correct).
+    let mut row = BTreeMap::new();
+    for s in stencils {
+        for k in 0..s.nodes.len() {
+            if in_support(s, k) {
+                row.insert(s.nodes[k], 0);
+            }
+        }
+    }
+    let used = row.len();
+    for (k, r) in row.values_mut().enumerate() {
+        *r = k;
+    }
+    let (mut a, mut rhs) = (vec![0.0; used], vec![Vector::<D>::zeros(); used]);
+    for (p, s) in stencils.iter().enumerate() {
+        let v = ps.volume(p);
+        for k in (0..s.nodes.len()).filter(|&k| in_support(s, k)) {
+            let i = row[&s.nodes[k]];
+            a[i] += v * s.values[k].abs();
+            rhs[i] -= v * s.gradients[k];
+        }
+    }
+    for b in 0..surface.len() {
+        let sb = stencil(sim, &surface.position[b]);
+        for (&n, &w) in sb.nodes.iter().zip(&sb.values) {
+            if let (true, Some(&i)) = (w != 0.0, row.get(&n)) {
+                rhs[i] += w * surface.area_normal[b];
+            }
+        }
+    }
+    // Connected bodies: nodes joined by a particle's support.
+    let mut body: Vec<usize> = (0..used).collect();
+    fn root(body: &mut [usize], mut i: usize) -> usize {
+        while body[i] != i {
+            i = body[i];
+        }
+        i
+    }
+    for s in stencils {
+        let rows: Vec<usize> = (0..s.nodes.len())
+            .filter(|&k| in_support(s, k))
+            .map(|k| row[&s.nodes[k]])
+            .collect();
+        for &i in &rows[1..] {
+            let (r0, ri) = (root(&mut body, rows[0]), root(&mut body, i));
+            body[ri] = r0;
+        }
+    }
+    let body: Vec<usize> = (0..used).map(|i| root(&mut body, i)).collect();
+    let mut mean = BTreeMap::<usize, (f64, Vector<D>)>::new();
+    for i in 0..used {
+        let e = mean.entry(body[i]).or_insert((0.0, Vector::zeros()));
+        e.0 += 1.0;
+        e.1 += rhs[i];
+    }
+    for i in 0..used {
+        let (count, sum) = mean[&body[i]];
+        rhs[i] -= sum / count;
+    }
+    // K.
+    let mut k = DMatrix::<f64>::from_diagonal(&DVector::from_vec(a.clone()));
+    for (p, s) in stencils.iter().enumerate() {
+        let v = ps.volume(p);
+        let support: Vec<(usize, f64)> = (0..s.nodes.len())
+            .filter(|&k| in_support(s, k))
+            .map(|k| (row[&s.nodes[k]], s.values[k].abs()))
+            .collect();
+        let weight: f64 = support.iter().map(|&(_, w)| w).sum();
+        for &(i, wi) in &support {
+            for &(j, wj) in &support {
+                k[(i, j)] -= v * wi * wj / weight;
+            }
+        }
+    }
+    // Scaled by the preconditioner, `K̃ = P^{-1/2} K P^{-1/2}` (`P = diag(A)`), whose null space
+    // is spanned per body by `v_b = P^{1/2} 1_b`; `K̃ + Σ_b v_b v_bᵀ` is positive definite and
+    // gives the solution orthogonal to them, the one of least `Σ_I A_I |ζ_I|²`.
+    let scale: Vec<f64> = a
+        .iter()
+        .map(|&a| if a > 0.0 { 1.0 / a.sqrt() } else { 0.0 })
+        .collect();
+    let mut scaled = DMatrix::from_fn(used, used, |i, j| scale[i] * k[(i, j)] * scale[j]);
+    for &b in mean.keys() {
+        let members: Vec<usize> = (0..used).filter(|&i| body[i] == b && a[i] > 0.0).collect();
+        let norm: f64 = members.iter().map(|&i| a[i]).sum();
+        for &i in &members {
+            for &j in &members {
+                scaled[(i, j)] += (a[i] * a[j]).sqrt() / norm;
+            }
+        }
+    }
+    for i in (0..used).filter(|&i| a[i] == 0.0) {
+        scaled[(i, i)] = 1.0;
+    }
+    let factor = scaled.cholesky().expect("K̃ + Σ v vᵀ is positive definite");
+    let mut zeta = vec![Vector::<D>::zeros(); used];
+    for c in 0..D {
+        let b = DVector::from_iterator(used, (0..used).map(|i| scale[i] * rhs[i][c]));
+        let y = factor.solve(&b);
+        for i in 0..used {
+            zeta[i][c] = scale[i] * y[i];
+        }
+    }
+    let h = sim.grid.cell_size;
+    for z in zeta.iter_mut() {
+        if z.norm() * h > VC_MAX_CORRECTION {
+            *z *= VC_MAX_CORRECTION / (z.norm() * h);
+        }
+    }
+    Ok(stencils
+        .iter()
+        .map(|s| {
+            let support = |k: &usize| in_support(s, *k);
+            let (mut weight, mut mu) = (0.0, Vector::<D>::zeros());
+            for k in (0..s.nodes.len()).filter(support) {
+                weight += s.values[k].abs();
+                mu += s.values[k].abs() * zeta[row[&s.nodes[k]]];
+            }
+            mu /= weight;
+            (0..s.nodes.len())
+                .map(|k| match support(&k) {
+                    true => s.values[k].abs() * (zeta[row[&s.nodes[k]]] - mu),
+                    false => Vector::zeros(),
+                })
+                .collect()
+        })
+        .collect())
+}
+
 /// Maps `m_p Ψ (v_p + C_p (x_I − x_p))` (and, with `forces`, `m_p Ψ` and the forces) of every
 /// particle to `nodes`. `velocity` and `affine` are the particles' own, or the new ones in
-/// MUSL's second map; `forces` is `(Δt, body accelerations)` (gravity added here).
+/// MUSL's second map; `forces` is `(Δt, body accelerations)` (gravity added here). `vc`: the
+/// corrections of the gradients in the internal force, per particle and stencil node. The body
+/// force goes to `nodes.body_force` when the nodes keep it apart.
 fn map_to_grid<const D: usize>(
     sim: &Sim<D>,
     stencils: &[Stencil<D>],
     velocity: &[Vector<D>],
     affine: &[Matrix<D>],
     forces: Option<(f64, &[Vector<D>])>,
+    vc: Option<&[Vec<Vector<D>>]>,
     nodes: &mut GridNodes<D>,
 ) {
+    let keep_body_force = !nodes.body_force.is_empty();
     let ps = &sim.particles;
     let mls = matches!(sim.options.transfer, Transfer::Mls);
     let inverse_inertia = sim.shape.apic_inertia(sim.grid.cell_size).map(|d| 1.0 / d);
@@ -65,8 +225,8 @@ fn map_to_grid<const D: usize>(
             mc = mc.map(|mc| mc + (dt * inverse_inertia.unwrap()) * internal.unwrap());
             (internal, body) = (None, None);
         }
-        for ((&n, &w), g) in s.nodes.iter().zip(&s.values).zip(&s.gradients) {
-            if w == 0.0 && *g == Vector::<D>::zeros() {
+        for (k, ((&n, &w), g)) in s.nodes.iter().zip(&s.values).zip(&s.gradients).enumerate() {
+            if !in_support(s, k) {
                 continue;
             }
             nodes.touch(n);
@@ -80,17 +240,22 @@ fn map_to_grid<const D: usize>(
                 nodes.mass[n] += m * w;
             }
             if let Some(vs) = internal {
-                nodes.force[n] += vs * g;
+                let correction = vc.map_or(Vector::zeros(), |vc| vc[p][k]);
+                nodes.force[n] += vs * (g + correction);
             }
-            if let Some(b) = body {
-                nodes.force[n] += (m * w) * b;
+            match body {
+                Some(b) if keep_body_force => nodes.body_force[n] += (m * w) * b,
+                Some(b) => nodes.force[n] += (m * w) * b,
+                None => {}
             }
         }
     }
 }
 
 /// Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` (or `(mv)_I / m_I` for MUSL's second map, `dt =
-/// None`) with the wall conditions; nodes at or below `mass_floor` get no velocity.
+/// None`) with the wall conditions; nodes at or below `mass_floor` get no velocity. When the
+/// body force is kept apart (VC), the internal force is divided by at least 1 % of the largest
+/// node mass, and without walls the force so held back is handed to the whole field.
 fn update_grid<const D: usize>(
     sim: &Sim<D>,
     nodes: &mut GridNodes<D>,
@@ -99,20 +264,45 @@ fn update_grid<const D: usize>(
 ) {
     let walls = &sim.options.walls;
     walls.fold(&sim.grid, nodes, dt.is_some());
+    let apart = !nodes.body_force.is_empty() && dt.is_some();
+    let largest = nodes
+        .active
+        .iter()
+        .map(|&n| nodes.mass[n])
+        .fold(0.0, f64::max);
+    let force_floor = if apart { 1e-2 * largest } else { 0.0 };
+    let (mut held, mut total) = (Vector::<D>::zeros(), 0.0);
     for k in 0..nodes.active.len() {
         let n = nodes.active[k];
         let m = nodes.mass[n];
+        let body = match apart {
+            true => nodes.body_force[n],
+            false => Vector::zeros(),
+        };
         if m <= mass_floor {
+            if let Some(dt) = dt {
+                held += nodes.force[n] + body + nodes.momentum[n] / dt;
+            }
             nodes.velocity[n] = Vector::zeros();
             nodes.velocity_old[n] = Vector::zeros();
             continue;
         }
+        total += m;
+        held += nodes.force[n] * (1.0 - m / force_floor).max(0.0);
         match dt {
             Some(dt) => {
                 nodes.velocity_old[n] = nodes.momentum[n] / m;
-                nodes.velocity[n] = nodes.momentum[n] / m + dt * nodes.force[n] / m;
+                nodes.velocity[n] =
+                    (nodes.momentum[n] + dt * body) / m + dt * nodes.force[n] / m.max(force_floor);
             }
             None => nodes.velocity[n] = nodes.momentum[n] / m,
+        }
+    }
+    if let (Some(dt), true) = (dt, apart && !walls.any_wall() && total > 0.0) {
+        for &n in &nodes.active {
+            if nodes.mass[n] > mass_floor {
+                nodes.velocity[n] += held * (dt / total);
+            }
         }
     }
     walls.apply_friction(&sim.grid, nodes);
@@ -146,7 +336,7 @@ fn gather<const D: usize>(
 /// particles unchanged) when a new state is not finite, inverted or outside the grid.
 pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate::Result<()> {
     assert!(
-        sim.vc.is_none()
+        sim.vc.as_ref().is_none_or(|vc| vc.order == 1)
             && sim.options.contact.is_none()
             && sim.boundary.is_empty()
             && !sim.shape.is_signed()
@@ -154,7 +344,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
                 .materials
                 .iter()
                 .all(|m| m.rigid_velocity::<D>().is_none()),
-        "the reference step covers nonnegative shapes, material points and one field"
+        "the reference step covers nonnegative shapes, VC of order 1 and one field"
     );
     assert!(
         sim.particles.in_id_order(),
@@ -175,9 +365,13 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
     let grid = &sim.grid;
     let stencils: Vec<Stencil<D>> = ps.position.iter().map(|x| stencil(sim, x)).collect();
     let mut nodes = GridNodes::<D>::default();
-    nodes.ensure(grid, false, false, false)?;
+    nodes.ensure(grid, false, false, sim.vc.is_some())?;
 
-    // Particle to grid, grid update.
+    // VC's corrections, particle to grid, grid update.
+    let vc = match sim.vc {
+        Some(_) => Some(vc_corrections(sim, &stencils)?),
+        None => None,
+    };
     let affine = &ps.affine;
     map_to_grid(
         sim,
@@ -185,6 +379,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         &ps.velocity,
         affine,
         Some((dt, &acceleration)),
+        vc.as_deref(),
         &mut nodes,
     );
     let largest_mass = ps.mass.iter().copied().fold(0.0, f64::max);
@@ -231,7 +426,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
             nodes.momentum[k] = Vector::zeros();
         }
         let new_affine = if apic { c.clone() } else { Vec::new() };
-        map_to_grid(sim, &stencils, &v, &new_affine, None, &mut nodes);
+        map_to_grid(sim, &stencils, &v, &new_affine, None, None, &mut nodes);
         update_grid(sim, &mut nodes, None, mass_floor);
         for (p, s) in stencils.iter().enumerate() {
             let (_, _, b, gradient) = gather(grid, s, &ps.position[p], &nodes);
@@ -291,7 +486,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::options::{Scheme, Side, Wall};
+    use crate::options::{Integration, Scheme, Side, Wall};
     use crate::shape::UniformRng;
     use crate::{Field, Material};
     use proptest::prelude::*;
@@ -307,6 +502,7 @@ mod tests {
         walls: [usize; 6],
         material: usize,
         body_force: bool,
+        vc: bool,
     }
 
     fn cases() -> impl Strategy<Value = Case> {
@@ -319,9 +515,10 @@ mod tests {
             prop::array::uniform6(0..4usize),
             0..3usize,
             any::<bool>(),
+            any::<bool>(),
         )
             .prop_map(
-                |(seed, shape, transfer, flip, musl, walls, material, body_force)| Case {
+                |(seed, shape, transfer, flip, musl, walls, material, body_force, vc)| Case {
                     seed,
                     shape,
                     transfer,
@@ -330,6 +527,7 @@ mod tests {
                     walls,
                     material,
                     body_force,
+                    vc,
                 },
             )
     }
@@ -352,10 +550,13 @@ mod tests {
         sim.set_shape(shape).unwrap();
         let transfer = match case.transfer {
             0 => Transfer::PicFlip { flip: case.flip },
-            2 if matches!(shape, Shape::BSpline2 | Shape::BSpline3) => Transfer::Mls,
+            2 if matches!(shape, Shape::BSpline2 | Shape::BSpline3) && !case.vc => Transfer::Mls,
             _ => Transfer::Apic,
         };
         sim.set_transfer(transfer).unwrap();
+        if case.vc {
+            sim.set_integration(Integration::Vc { order: 1 }).unwrap();
+        }
         let scheme = if case.musl { Scheme::Musl } else { Scheme::Usl };
         sim.set_scheme(scheme).unwrap();
         for a in 0..D {
@@ -414,8 +615,9 @@ mod tests {
     /// and rows, factored per axis), so they agree to a few ulps of each quantity's scale per
     /// step, which four steps and the stiff material's stresses amplify: the largest difference
     /// over these cases is 7e-13 of the field's largest value (stresses), and the bound is
-    /// 1e-11. Dropping the friction walls' friction differs by 3e-3; scaling APIC's `B` by
-    /// `1 + 1e-7` differs by 1e-10.
+    /// 1e-11 (with VC also 9e-13). Dropping the friction walls' friction differs by 3e-3;
+    /// scaling APIC's `B` by `1 + 1e-7` differs by 1e-10, VC's corrections by `1 + 1e-7` by
+    /// 3e-9.
     fn same_steps<const D: usize>(case: &Case) -> std::result::Result<(), TestCaseError> {
         let (mut fast, mut reference) = (scene::<D>(case), scene::<D>(case));
         for _ in 0..4 {
