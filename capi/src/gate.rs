@@ -100,7 +100,8 @@ pub unsafe fn slice<'a, T>(name: &str, ptr: *const T, len: usize) -> Result<&'a 
         return Ok(&[]);
     }
     check_ptr(name, ptr)?;
-    Ok(std::slice::from_raw_parts(ptr, len))
+    // SAFETY: non-NULL and aligned (checked); `len` readable values by the contract above.
+    Ok(unsafe { std::slice::from_raw_parts(ptr, len) })
 }
 
 /// The option kind (or field) `K` whose C code is `code`; `RKMPM_ERR_INVALID_ARGUMENT` naming

@@ -9,6 +9,8 @@
 
 #![allow(non_camel_case_types)]
 #![allow(clippy::missing_safety_doc)] // every function below has a `# Safety` section
+#![deny(unsafe_op_in_unsafe_fn)]
+#![deny(clippy::undocumented_unsafe_blocks)]
 
 pub mod gate;
 pub mod status;
@@ -196,21 +198,24 @@ macro_rules! with_sim {
 /// `sim` must be NULL or a live handle from `rkmpm_sim_new`.
 unsafe fn sim_ref<'a>(sim: *const RkmpmSim) -> Result<&'a RkmpmSim, Failure> {
     check_ptr("sim", sim)?;
-    Ok(&*sim)
+    // SAFETY: non-NULL and aligned (checked); live by the contract above.
+    Ok(unsafe { &*sim })
 }
 
 /// # Safety
 /// `sim` must be NULL or a live handle from `rkmpm_sim_new`, not used by another thread.
 unsafe fn sim_mut<'a>(sim: *mut RkmpmSim) -> Result<&'a mut RkmpmSim, Failure> {
     check_ptr("sim", sim)?;
-    Ok(&mut *sim)
+    // SAFETY: non-NULL and aligned (checked); live and not shared by the contract above.
+    Ok(unsafe { &mut *sim })
 }
 
 /// # Safety
 /// `out` must be NULL or valid for one write of `T`.
 unsafe fn write_out<T>(name: &str, out: *mut T, value: T) -> Result<(), Failure> {
     check_ptr(name, out)?;
-    out.write(value);
+    // SAFETY: non-NULL and aligned (checked); writable by the contract above.
+    unsafe { out.write(value) };
     Ok(())
 }
 
@@ -221,9 +226,12 @@ fn vectors<const D: usize>(values: &[f64]) -> Vec<Vector<D>> {
         .collect()
 }
 
+/// # Safety
+/// `path` must be NULL or point to a NUL-terminated string.
 unsafe fn c_path<'a>(name: &str, path: *const c_char) -> Result<&'a str, Failure> {
     check_ptr(name, path)?;
-    CStr::from_ptr(path).to_str().map_err(|_| {
+    // SAFETY: non-NULL (checked) and NUL-terminated by the contract above.
+    unsafe { CStr::from_ptr(path) }.to_str().map_err(|_| {
         Failure::new(
             RKMPM_ERR_INVALID_ARGUMENT,
             format!("{name} is not valid UTF-8"),
@@ -267,8 +275,12 @@ pub unsafe extern "C" fn rkmpm_last_error_message(buf: *mut c_char, len: usize) 
     let message = gate::last_error();
     if len > 0 && !buf.is_null() {
         let n = message.len().min(len - 1);
-        std::ptr::copy_nonoverlapping(message.as_ptr(), buf.cast::<u8>(), n);
-        *buf.add(n) = 0;
+        // SAFETY: `buf` is non-NULL (checked) and holds `len > n` bytes (this function's
+        // `# Safety`); the message is a separate Rust string.
+        unsafe {
+            std::ptr::copy_nonoverlapping(message.as_ptr(), buf.cast::<u8>(), n);
+            *buf.add(n) = 0;
+        }
     }
     message.len()
 }
@@ -289,7 +301,8 @@ pub unsafe extern "C" fn rkmpm_sim_new(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_new", || {
         check_ptr("out", out)?;
-        out.write(std::ptr::null_mut());
+        // SAFETY: non-NULL and aligned (checked); writable by this function's `# Safety`.
+        unsafe { out.write(std::ptr::null_mut()) };
         if dim != 2 && dim != 3 {
             return Err(Failure::new(
                 RKMPM_ERR_INVALID_ARGUMENT,
@@ -297,8 +310,10 @@ pub unsafe extern "C" fn rkmpm_sim_new(
             ));
         }
         let d = dim as usize;
-        let origin = slice("origin", origin, d)?;
-        let cells = slice("cells", cells, d)?;
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        let origin = unsafe { slice("origin", origin, d) }?;
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        let cells = unsafe { slice("cells", cells, d) }?;
         let sim = if d == 2 {
             AnySim::D2(Sim::new(
                 Vector::<2>::from_column_slice(origin),
@@ -312,12 +327,14 @@ pub unsafe extern "C" fn rkmpm_sim_new(
                 cell_size,
             )?)
         };
-        out.write(Box::into_raw(Box::new(RkmpmSim {
+        let handle = Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
             progress: None,
             progress_data: std::ptr::null_mut(),
-        })));
+        }));
+        // SAFETY: as above.
+        unsafe { out.write(handle) };
         Ok(())
     })
 }
@@ -333,8 +350,10 @@ pub unsafe extern "C" fn rkmpm_sim_new(
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_save(sim: *const RkmpmSim, path: *const c_char) -> RkmpmStatus {
     gate("rkmpm_sim_save", || {
-        let s = sim_ref(sim)?;
-        let path = c_path("path", path)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
+        let path = unsafe { c_path("path", path) }?;
         with_sim!(&s.sim, m => m.save(path))?;
         Ok(())
     })
@@ -354,19 +373,23 @@ pub unsafe extern "C" fn rkmpm_sim_load(
 ) -> RkmpmStatus {
     gate("rkmpm_sim_load", || {
         check_ptr("out", out)?;
-        out.write(std::ptr::null_mut());
-        let path = c_path("path", path)?;
+        // SAFETY: non-NULL and aligned (checked); writable by this function's `# Safety`.
+        unsafe { out.write(std::ptr::null_mut()) };
+        // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
+        let path = unsafe { c_path("path", path) }?;
         let bytes = std::fs::read(path).map_err(rkmpm::Error::from)?;
         let sim = match rkmpm::io::checkpoint::checkpoint_dimension(&bytes)? {
             2 => AnySim::D2(Sim::<2>::from_checkpoint_bytes(&bytes)?),
             _ => AnySim::D3(Sim::<3>::from_checkpoint_bytes(&bytes)?),
         };
-        out.write(Box::into_raw(Box::new(RkmpmSim {
+        let handle = Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
             progress: None,
             progress_data: std::ptr::null_mut(),
-        })));
+        }));
+        // SAFETY: as above.
+        unsafe { out.write(handle) };
         Ok(())
     })
 }
@@ -378,7 +401,10 @@ pub unsafe extern "C" fn rkmpm_sim_load(
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_free(sim: *mut RkmpmSim) {
     if !sim.is_null() && sim.is_aligned() {
-        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| drop(Box::from_raw(sim))));
+        // SAFETY: a non-NULL `sim` is a handle from `rkmpm_sim_new` or `rkmpm_sim_load` not freed
+        // yet (this function's `# Safety`), so it came from `Box::into_raw`.
+        let free = || drop(unsafe { Box::from_raw(sim) });
+        let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(free));
     }
 }
 
@@ -389,12 +415,14 @@ pub unsafe extern "C" fn rkmpm_sim_free(sim: *mut RkmpmSim) {
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_dim(sim: *const RkmpmSim, out_dim: *mut u32) -> RkmpmStatus {
     gate("rkmpm_sim_dim", || {
-        let s = sim_ref(sim)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
         let d = match s.sim {
             AnySim::D2(_) => 2,
             AnySim::D3(_) => 3,
         };
-        write_out("out_dim", out_dim, d)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_dim", out_dim, d) }
     })
 }
 
@@ -412,7 +440,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_shape(
     rk_support: f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_shape", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let shape = Shape::from_kind(kind_of("shape", shape)?, rk_order, rk_support);
         with_sim!(&mut s.sim, m => m.set_shape(shape))?;
         Ok(())
@@ -431,7 +460,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_integration(
     vc_order: u32,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_integration", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let integration = Integration::from_kind(kind_of("integration", integration)?, vc_order);
         with_sim!(&mut s.sim, m => m.set_integration(integration))?;
         Ok(())
@@ -452,7 +482,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_transfer(
     flip_ratio: f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_transfer", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let transfer = Transfer::from_kind(kind_of("transfer", transfer)?, flip_ratio);
         with_sim!(&mut s.sim, m => m.set_transfer(transfer))?;
         Ok(())
@@ -475,7 +506,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_contact(
     friction: f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_contact", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let on = flag("enabled", enabled)?;
         with_sim!(&mut s.sim, m => m.set_contact(on.then_some(friction)))?;
         Ok(())
@@ -496,15 +528,18 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_rigid(
     out_id: *mut u32,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_add_material_rigid", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         check_ptr("out_id", out_id)?;
         let d = with_sim!(&s.sim, m => m.grid().cells.len());
-        let v = slice("velocity", velocity, d)?;
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        let v = unsafe { slice("velocity", velocity, d) }?;
         let mut v3 = [0.0; 3];
         v3[..d].copy_from_slice(v);
         let material = Material::rigid(density, v3)?;
         let id = with_sim!(&mut s.sim, m => m.add_material(material));
-        write_out("out_id", out_id, id)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_id", out_id, id) }
     })
 }
 
@@ -522,9 +557,11 @@ pub unsafe extern "C" fn rkmpm_sim_set_rigid_velocity(
     velocity: *const f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_rigid_velocity", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let d = with_sim!(&s.sim, m => m.grid().cells.len());
-        let v = slice("velocity", velocity, d)?;
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        let v = unsafe { slice("velocity", velocity, d) }?;
         let mut v3 = [0.0; 3];
         v3[..d].copy_from_slice(v);
         with_sim!(&mut s.sim, m => m.set_rigid_velocity(material, v3))?;
@@ -542,7 +579,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_scheme(
     scheme: RkmpmScheme,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_scheme", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let scheme: Scheme = kind_of("scheme", scheme)?;
         with_sim!(&mut s.sim, m => m.set_scheme(scheme))?;
         Ok(())
@@ -556,9 +594,11 @@ pub unsafe extern "C" fn rkmpm_sim_set_scheme(
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_set_gravity(sim: *mut RkmpmSim, g: *const f64) -> RkmpmStatus {
     gate("rkmpm_sim_set_gravity", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         with_sim!(&mut s.sim, m => {
-            let g = slice("g", g, m.grid().cells.len())?;
+            // SAFETY: `g` holds `dim` values (this function's `# Safety`).
+            let g = unsafe { slice("g", g, m.grid().cells.len()) }?;
             m.set_gravity(Vector::from_column_slice(g))?;
         });
         Ok(())
@@ -579,7 +619,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_boundary(
     friction: f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_boundary", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let side = Side::from_sign(side)?;
         let boundary = Wall::from_kind(kind_of("boundary", kind)?, friction);
         with_sim!(&mut s.sim, m => m.set_wall(axis as usize, side, boundary))?;
@@ -650,7 +691,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_body_force(
     user_data: *mut c_void,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_body_force", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         with_sim!(&mut s.sim, m => m.set_body_force(f.map(|f| {
             Box::new(CBodyForce { f, user: user_data, buffers: Default::default() }) as Box<_>
         })));
@@ -670,13 +712,18 @@ pub unsafe extern "C" fn rkmpm_sim_set_progress(
     user_data: *mut c_void,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_progress", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         s.progress = f;
         s.progress_data = user_data;
         Ok(())
     })
 }
 
+/// The body of every `rkmpm_sim_add_material_*`: checks, makes the material, writes its id.
+///
+/// # Safety
+/// `sim` must be NULL or a live handle used by this thread only; `out_id` NULL or writable.
 unsafe fn add_material(
     function: &str,
     sim: *mut RkmpmSim,
@@ -684,11 +731,13 @@ unsafe fn add_material(
     make: impl FnOnce() -> rkmpm::Result<Material>,
 ) -> RkmpmStatus {
     gate(function, || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         check_ptr("out_id", out_id)?;
         let material = make()?;
         let id = with_sim!(&mut s.sim, m => m.add_material(material));
-        write_out("out_id", out_id, id)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_id", out_id, id) }
     })
 }
 
@@ -705,9 +754,12 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_linear_elastic(
     poisson: f64,
     out_id: *mut u32,
 ) -> RkmpmStatus {
-    add_material("rkmpm_sim_add_material_linear_elastic", sim, out_id, || {
-        Material::linear_elastic(density, young, poisson)
-    })
+    // SAFETY: `sim` and `out_id` as `add_material` requires (this function's `# Safety`).
+    unsafe {
+        add_material("rkmpm_sim_add_material_linear_elastic", sim, out_id, || {
+            Material::linear_elastic(density, young, poisson)
+        })
+    }
 }
 
 /// Adds a compressible neo-Hookean material (same arguments as the linear elastic one).
@@ -722,9 +774,12 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_neo_hookean(
     poisson: f64,
     out_id: *mut u32,
 ) -> RkmpmStatus {
-    add_material("rkmpm_sim_add_material_neo_hookean", sim, out_id, || {
-        Material::neo_hookean(density, young, poisson)
-    })
+    // SAFETY: `sim` and `out_id` as `add_material` requires (this function's `# Safety`).
+    unsafe {
+        add_material("rkmpm_sim_add_material_neo_hookean", sim, out_id, || {
+            Material::neo_hookean(density, young, poisson)
+        })
+    }
 }
 
 /// Adds a Drucker–Prager soil (Hencky elasticity, return mapping with apex, non-associated
@@ -746,16 +801,19 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_drucker_prager(
     dilatancy_angle: f64,
     out_id: *mut u32,
 ) -> RkmpmStatus {
-    add_material("rkmpm_sim_add_material_drucker_prager", sim, out_id, || {
-        Material::drucker_prager(
-            density,
-            young,
-            poisson,
-            friction_angle,
-            cohesion,
-            dilatancy_angle,
-        )
-    })
+    // SAFETY: `sim` and `out_id` as `add_material` requires (this function's `# Safety`).
+    unsafe {
+        add_material("rkmpm_sim_add_material_drucker_prager", sim, out_id, || {
+            Material::drucker_prager(
+                density,
+                young,
+                poisson,
+                friction_angle,
+                cohesion,
+                dilatancy_angle,
+            )
+        })
+    }
 }
 
 /// Gives the Drucker–Prager material `material` the μ(I) rate dependence of its friction
@@ -778,7 +836,8 @@ pub unsafe extern "C" fn rkmpm_sim_set_drucker_prager_rheology(
     grain_diameter: f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_set_drucker_prager_rheology", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         let on = flag("enabled", enabled)?;
         let rheology = if on {
             Some(rkmpm::material::InertialRheology::new(
@@ -852,10 +911,12 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_johnson_cook(
     out_id: *mut u32,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_add_material_johnson_cook", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         check_ptr("parameters", parameters)?;
         check_ptr("out_id", out_id)?;
-        let p = *parameters;
+        // SAFETY: non-NULL and aligned (checked); readable by this function's `# Safety`.
+        let p = unsafe { *parameters };
         let damage = flag("damage_enabled", p.damage_enabled)?;
         let eos = flag("eos_enabled", p.eos_enabled)?;
         let material = Material::johnson_cook(rkmpm::material::JohnsonCookParameters {
@@ -880,7 +941,8 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_johnson_cook(
             }),
         })?;
         let id = with_sim!(&mut s.sim, m => m.add_material(material));
-        write_out("out_id", out_id, id)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_id", out_id, id) }
     })
 }
 
@@ -899,11 +961,18 @@ pub unsafe extern "C" fn rkmpm_sim_add_particles(
     velocities: *const f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_add_particles", || {
-        let s = sim_mut(sim)?;
-        with_sim!(&mut s.sim, m => add_particles(m, material, count, positions, volumes, velocities))
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        // SAFETY: the arrays hold `count` particles' values (this function's `# Safety`).
+        with_sim!(&mut s.sim, m => unsafe {
+            add_particles(m, material, count, positions, volumes, velocities)
+        })
     })
 }
 
+/// # Safety
+/// `positions` (and `velocities`, when not NULL) must hold `count · D` values and `volumes`
+/// `count` values.
 unsafe fn add_particles<const D: usize>(
     m: &mut Sim<D>,
     material: u32,
@@ -913,12 +982,15 @@ unsafe fn add_particles<const D: usize>(
     velocities: *const f64,
 ) -> Result<(), Failure> {
     let n = checked_len("count", count, D)?;
-    let x = vectors::<D>(slice("positions", positions, n)?);
-    let vol = slice("volumes", volumes, count)?;
+    // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+    let x = vectors::<D>(unsafe { slice("positions", positions, n) }?);
+    // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+    let vol = unsafe { slice("volumes", volumes, count) }?;
     let v = if velocities.is_null() {
         None
     } else {
-        Some(vectors::<D>(slice("velocities", velocities, n)?))
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        Some(vectors::<D>(unsafe { slice("velocities", velocities, n) }?))
     };
     m.add_particles(material, &x, vol, v.as_deref())?;
     Ok(())
@@ -942,11 +1014,17 @@ pub unsafe extern "C" fn rkmpm_sim_add_boundary_points(
     tractions: *const f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_add_boundary_points", || {
-        let s = sim_mut(sim)?;
-        with_sim!(&mut s.sim, m => add_boundary_points(m, count, positions, area_normals, tractions))
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        // SAFETY: the arrays hold `count` points' values (this function's `# Safety`).
+        with_sim!(&mut s.sim, m => unsafe {
+            add_boundary_points(m, count, positions, area_normals, tractions)
+        })
     })
 }
 
+/// # Safety
+/// `positions`, `area_normals` (and `tractions`, when not NULL) must hold `count · D` values.
 unsafe fn add_boundary_points<const D: usize>(
     m: &mut Sim<D>,
     count: usize,
@@ -955,12 +1033,15 @@ unsafe fn add_boundary_points<const D: usize>(
     tractions: *const f64,
 ) -> Result<(), Failure> {
     let n = checked_len("count", count, D)?;
-    let x = vectors::<D>(slice("positions", positions, n)?);
-    let na = vectors::<D>(slice("area_normals", area_normals, n)?);
+    // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+    let x = vectors::<D>(unsafe { slice("positions", positions, n) }?);
+    // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+    let na = vectors::<D>(unsafe { slice("area_normals", area_normals, n) }?);
     let t = if tractions.is_null() {
         None
     } else {
-        Some(vectors::<D>(slice("tractions", tractions, n)?))
+        // SAFETY: the array holds the stated number of values (this function's `# Safety`).
+        Some(vectors::<D>(unsafe { slice("tractions", tractions, n) }?))
     };
     m.add_boundary_points(&x, &na, t.as_deref())?;
     Ok(())
@@ -978,12 +1059,11 @@ pub unsafe extern "C" fn rkmpm_sim_boundary_point_count(
     out_count: *mut usize,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_boundary_point_count", || {
-        let s = sim_ref(sim)?;
-        write_out(
-            "out_count",
-            out_count,
-            with_sim!(&s.sim, m => m.vc_surface().len()),
-        )
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let count = with_sim!(&s.sim, m => m.vc_surface().len());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_count", out_count, count) }
     })
 }
 
@@ -999,10 +1079,12 @@ pub unsafe extern "C" fn rkmpm_sim_stable_dt(
     out_dt: *mut f64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_stable_dt", || {
-        let s = sim_ref(sim)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
         check_ptr("out_dt", out_dt)?;
         let dt = with_sim!(&s.sim, m => m.stable_dt(cfl))?;
-        write_out("out_dt", out_dt, dt)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_dt", out_dt, dt) }
     })
 }
 
@@ -1015,7 +1097,8 @@ pub unsafe extern "C" fn rkmpm_sim_stable_dt(
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_step(sim: *mut RkmpmSim, dt: f64) -> RkmpmStatus {
     gate("rkmpm_sim_step", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         with_sim!(&mut s.sim, m => m.step(dt))?;
         Ok(())
     })
@@ -1040,7 +1123,8 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
     out_steps: *mut u64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_advance", || {
-        let s = sim_mut(sim)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
         if !out_steps.is_null() {
             check_ptr("out_steps", out_steps)?;
         }
@@ -1054,7 +1138,7 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
         let result = with_sim!(&mut s.sim, m => m.advance_observed(duration, cfl, &mut observe));
         if !out_steps.is_null() {
             // SAFETY: checked non-NULL and aligned; the caller promises it is writable.
-            out_steps.write(with_sim!(&s.sim, m => m.steps()) - before);
+            unsafe { out_steps.write(with_sim!(&s.sim, m => m.steps()) - before) };
         }
         result?;
         Ok(())
@@ -1068,8 +1152,11 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
 #[no_mangle]
 pub unsafe extern "C" fn rkmpm_sim_time(sim: *const RkmpmSim, out_time: *mut f64) -> RkmpmStatus {
     gate("rkmpm_sim_time", || {
-        let s = sim_ref(sim)?;
-        write_out("out_time", out_time, with_sim!(&s.sim, m => m.time()))
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let time = with_sim!(&s.sim, m => m.time());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_time", out_time, time) }
     })
 }
 
@@ -1083,8 +1170,11 @@ pub unsafe extern "C" fn rkmpm_sim_step_count(
     out_steps: *mut u64,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_step_count", || {
-        let s = sim_ref(sim)?;
-        write_out("out_steps", out_steps, with_sim!(&s.sim, m => m.steps()))
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let steps = with_sim!(&s.sim, m => m.steps());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_steps", out_steps, steps) }
     })
 }
 
@@ -1097,7 +1187,8 @@ pub unsafe extern "C" fn rkmpm_sim_particle_count(sim: *const RkmpmSim) -> usize
     if sim.is_null() || !sim.is_aligned() {
         return 0;
     }
-    with_sim!(&(*sim).sim, m => m.particles().len())
+    // SAFETY: non-NULL and aligned (checked); a live handle by this function's `# Safety`.
+    with_sim!(unsafe { &(*sim).sim }, m => m.particles().len())
 }
 
 fn field_from(field: RkmpmField) -> Result<Field, Failure> {
@@ -1115,10 +1206,12 @@ pub unsafe extern "C" fn rkmpm_sim_field_len(
     out_len: *mut usize,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_field_len", || {
-        let s = sim_ref(sim)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
         let n = with_sim!(&s.sim, m => f.components(m.grid().cells.len()) * m.particles().len());
-        write_out("out_len", out_len, n)
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_len", out_len, n) }
     })
 }
 
@@ -1139,7 +1232,8 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
     len: usize,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_get_particles", || {
-        let s = sim_ref(sim)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
         with_sim!(&s.sim, m => {
             let need = f.components(m.grid().cells.len()) * m.particles().len();
@@ -1151,7 +1245,10 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
             }
             if need > 0 {
                 check_ptr("out", out)?;
-                m.particles().write_field(f, std::slice::from_raw_parts_mut(out, need));
+                // SAFETY: non-NULL (checked); `out` holds `len >= need` values (checked above,
+                // and this function's `# Safety`).
+                let out = unsafe { std::slice::from_raw_parts_mut(out, need) };
+                m.particles().write_field(f, out);
             }
         });
         Ok(())
@@ -1168,8 +1265,10 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk(
     path: *const c_char,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_write_vtk", || {
-        let s = sim_ref(sim)?;
-        let path = c_path("path", path)?;
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
+        let path = unsafe { c_path("path", path) }?;
         with_sim!(&s.sim, m => vtk::write_particles(m, path))?;
         Ok(())
     })
@@ -1186,8 +1285,10 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk_frame(
     prefix: *const c_char,
 ) -> RkmpmStatus {
     gate("rkmpm_sim_write_vtk_frame", || {
-        let s = sim_mut(sim)?;
-        let prefix = c_path("prefix", prefix)?;
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
+        let prefix = unsafe { c_path("prefix", prefix) }?;
         if prefix.is_empty() || prefix.ends_with('/') {
             return Err(Failure::new(
                 RKMPM_ERR_INVALID_ARGUMENT,

@@ -2,6 +2,8 @@
 //! progress bar, writes VTK frames for ParaView and prints a summary. `rkmpm --help` explains
 //! every option.
 
+#![forbid(unsafe_code)]
+
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use rkmpm::io::vtk::VtkSeries;

@@ -3,5 +3,7 @@
 //! (manufactured solutions, self-weight column), built on the engine's public API.
 //! `examples/` regenerates the tables and plots under `docs/`; `tests/` checks them.
 
+#![forbid(unsafe_code)]
+
 pub mod scenes;
 pub mod verification;
