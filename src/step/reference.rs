@@ -3,15 +3,16 @@
 //! stored stencils). It is the oracle the fast step is tested against (`tests.rs`,
 //! `fast_step_matches_the_reference_step`): both must give the same particle state to round-off.
 //!
-//! It covers what the fast step does with one velocity field and gravity: linear hats,
-//! B-splines, RK of order 1 and of order 2 (signed, with the transfer weights of `edge_lumping`
-//! at a body's edge), every transfer (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind
-//! of wall, every material, material-point integration and VC of order 1 over the surface found
-//! from the particles. The wall conditions are the walls' own
-//! (`Walls::fold`, `apply_friction`, `unfold`), the stresses the materials' own and the found
-//! surface `BoundaryPoints::of_particles`'s: the oracle is for the schedule, the data layout and
-//! VC's solve, not for those. VC's correction is solved here densely (a Cholesky factor of the
-//! node system with its null space added), where the fast step runs preconditioned conjugate
+//! It covers what the fast step does with one velocity field, or one per body under contact
+//! (deformable or rigid), and gravity: linear hats, B-splines, RK of order 1 and of order 2
+//! (signed, with the transfer weights of `edge_lumping` at a body's edge), every transfer
+//! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material,
+//! material-point integration and VC of order 1 over the surface found from the particles. The
+//! wall conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`), the stresses
+//! the materials' own, the contact law `contact::correct_velocities`'s and the found surface
+//! `BoundaryPoints::of_particles`'s: the oracle is for the schedule, the data layout and VC's
+//! solve, not for those. VC's correction is solved here densely (a Cholesky factor of the node
+//! system with its null space added), where the fast step runs preconditioned conjugate
 //! gradients.
 
 use crate::grid::{Grid, GridNodes};
@@ -59,10 +60,12 @@ fn stencil<const D: usize>(sim: &Sim<D>, x: &Vector<D>) -> Stencil<D> {
 fn blend_transfer_weights<const D: usize>(
     sim: &Sim<D>,
     stencils: &mut [Stencil<D>],
+    body: Option<u32>,
 ) -> crate::Result<()> {
+    let member = |p: usize| body.is_none_or(|b| sim.particles.material[p] == b);
     let mut nodes = GridNodes::<D>::default();
     nodes.ensure(&sim.grid, true, false, false)?;
-    for (p, s) in stencils.iter().enumerate() {
+    for (p, s) in stencils.iter().enumerate().filter(|&(p, _)| member(p)) {
         let m = sim.particles.mass[p];
         for k in 0..s.nodes.len() {
             nodes.touch(s.nodes[k]);
@@ -82,7 +85,7 @@ fn blend_transfer_weights<const D: usize>(
     sim.options
         .walls
         .unfold_values(&sim.grid, &nodes.active, &mut theta);
-    for s in stencils {
+    for (_, s) in stencils.iter_mut().enumerate().filter(|&(p, _)| member(p)) {
         if s.nodes.iter().all(|&n| theta[n] == 1.0) {
             continue;
         }
@@ -119,14 +122,20 @@ fn in_support<const D: usize>(s: &Stencil<D>, k: usize) -> bool {
 /// `VC_MAX_CORRECTION / h`.
 fn vc_corrections<const D: usize>(
     sim: &Sim<D>,
-    stencils: &[Stencil<D>],
+    all_stencils: &[Stencil<D>],
+    body: Option<u32>,
 ) -> crate::Result<Vec<Vec<Vector<D>>>> {
     let ps = &sim.particles;
-    let surface = super::surface::found_surface(&sim.grid, ps, None)?;
+    let surface = super::surface::found_surface(&sim.grid, ps, body)?;
+    // The particles of `body` (all without contact), and their stencils.
+    let members: Vec<usize> = (0..ps.len())
+        .filter(|&p| body.is_none_or(|b| ps.material[p] == b))
+        .collect();
+    let stencils: Vec<&Stencil<D>> = members.iter().map(|&p| &all_stencils[p]).collect();
     // A row per node of the particles' supports (a node that only boundary points reach has no
     // particle to correct).
     let mut row = BTreeMap::new();
-    for s in stencils {
+    for s in &stencils {
         for k in 0..s.nodes.len() {
             if in_support(s, k) {
                 row.insert(s.nodes[k], 0);
@@ -138,7 +147,7 @@ fn vc_corrections<const D: usize>(
         *r = k;
     }
     let (mut a, mut rhs) = (vec![0.0; used], vec![Vector::<D>::zeros(); used]);
-    for (p, s) in stencils.iter().enumerate() {
+    for (&p, s) in members.iter().zip(&stencils) {
         let v = ps.volume(p);
         for k in (0..s.nodes.len()).filter(|&k| in_support(s, k)) {
             let i = row[&s.nodes[k]];
@@ -162,7 +171,7 @@ fn vc_corrections<const D: usize>(
         }
         i
     }
-    for s in stencils {
+    for s in &stencils {
         let rows: Vec<usize> = (0..s.nodes.len())
             .filter(|&k| in_support(s, k))
             .map(|k| row[&s.nodes[k]])
@@ -185,7 +194,7 @@ fn vc_corrections<const D: usize>(
     }
     // K.
     let mut k = DMatrix::<f64>::from_diagonal(&DVector::from_vec(a.clone()));
-    for (p, s) in stencils.iter().enumerate() {
+    for (&p, s) in members.iter().zip(&stencils) {
         let v = ps.volume(p);
         let support: Vec<(usize, f64)> = (0..s.nodes.len())
             .filter(|&k| in_support(s, k))
@@ -233,9 +242,12 @@ fn vc_corrections<const D: usize>(
             *z *= VC_MAX_CORRECTION / (z.norm() * h);
         }
     }
-    Ok(stencils
+    let mut corrections: Vec<Vec<Vector<D>>> = all_stencils
         .iter()
-        .map(|s| {
+        .map(|s| vec![Vector::zeros(); s.nodes.len()])
+        .collect();
+    for (&p, s) in members.iter().zip(&stencils) {
+        corrections[p] = {
             let support = |k: &usize| in_support(s, *k);
             let (mut weight, mut mu) = (0.0, Vector::<D>::zeros());
             for k in (0..s.nodes.len()).filter(support) {
@@ -249,29 +261,50 @@ fn vc_corrections<const D: usize>(
                     false => Vector::zeros(),
                 })
                 .collect()
-        })
-        .collect())
+        };
+    }
+    Ok(corrections)
 }
 
-/// Maps `m_p Ψ (v_p + C_p (x_I − x_p))` (and, with `forces`, `m_p Ψ` and the forces) of every
-/// particle to `nodes`. `velocity` and `affine` are the particles' own, or the new ones in
-/// MUSL's second map; `forces` is `(Δt, body accelerations)` (gravity added here). `vc`: the
-/// corrections of the gradients in the internal force, per particle and stencil node. The body
-/// force goes to `nodes.body_force` when the nodes keep it apart.
+/// What one map to the grid maps.
+struct Map<'a, const D: usize> {
+    /// The particles' velocities and APIC matrices: their own, or the new ones in MUSL's second
+    /// map (no matrices: none mapped).
+    velocity: &'a [Vector<D>],
+    affine: &'a [Matrix<D>],
+    /// `(Δt, body accelerations)` (gravity added here): also map mass and forces.
+    forces: Option<(f64, &'a [Vector<D>])>,
+    /// VC's corrections of the gradients in the internal force, per particle and stencil node.
+    vc: Option<&'a [Vec<Vector<D>>]>,
+    /// Under contact, the body (material) whose particles map.
+    body: Option<u32>,
+}
+
+/// Maps `m_p Ψ (v_p + C_p (x_I − x_p))` (and, with forces, `m_p Ψ` and the forces) of every
+/// particle (of the body) to `nodes`. The body force goes to `nodes.body_force` when the nodes
+/// keep it apart.
 fn map_to_grid<const D: usize>(
     sim: &Sim<D>,
     stencils: &[Stencil<D>],
-    velocity: &[Vector<D>],
-    affine: &[Matrix<D>],
-    forces: Option<(f64, &[Vector<D>])>,
-    vc: Option<&[Vec<Vector<D>>]>,
+    map: &Map<'_, D>,
     nodes: &mut GridNodes<D>,
 ) {
+    let Map {
+        velocity,
+        affine,
+        forces,
+        vc,
+        body,
+    } = *map;
     let keep_body_force = !nodes.body_force.is_empty();
+    let with_gradient = !nodes.mass_gradient.is_empty();
     let ps = &sim.particles;
     let mls = matches!(sim.options.transfer, Transfer::Mls);
     let inverse_inertia = sim.shape.apic_inertia(sim.grid.cell_size).map(|d| 1.0 / d);
     for (p, s) in stencils.iter().enumerate() {
+        if body.is_some_and(|b| ps.material[p] != b) {
+            continue;
+        }
         let m = ps.mass[p];
         let volume = ps.volume(p);
         let mut mv = m * velocity[p];
@@ -303,6 +336,9 @@ fn map_to_grid<const D: usize>(
             nodes.momentum[n] += w * momentum;
             if forces.is_some() {
                 nodes.mass[n] += m * w;
+                if with_gradient {
+                    nodes.mass_gradient[n] += m * g;
+                }
             }
             if let Some(vs) = internal {
                 let correction = vc.map_or(Vector::zeros(), |vc| vc[p][k]);
@@ -401,14 +437,8 @@ fn gather<const D: usize>(
 /// particles unchanged) when a new state is not finite, inverted or outside the grid.
 pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate::Result<()> {
     assert!(
-        sim.vc.as_ref().is_none_or(|vc| vc.order == 1)
-            && sim.options.contact.is_none()
-            && sim.boundary.is_empty()
-            && sim
-                .materials
-                .iter()
-                .all(|m| m.rigid_velocity::<D>().is_none()),
-        "the reference step covers VC of order 1 over the found surface and one field"
+        sim.vc.as_ref().is_none_or(|vc| vc.order == 1) && sim.boundary.is_empty(),
+        "the reference step covers VC of order 1 over the found surface"
     );
     assert!(
         sim.particles.in_id_order(),
@@ -429,31 +459,57 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
     let grid = &sim.grid;
     let mut stencils: Vec<Stencil<D>> = ps.position.iter().map(|x| stencil(sim, x)).collect();
     let signed = sim.shape.is_signed();
-    if signed {
-        blend_transfer_weights(sim, &mut stencils)?;
-    }
-    let mut nodes = GridNodes::<D>::default();
-    nodes.ensure(grid, false, false, signed || sim.vc.is_some())?;
-
-    // VC's corrections, particle to grid, grid update.
-    let vc = match sim.vc {
-        Some(_) => Some(vc_corrections(sim, &stencils)?),
-        None => None,
+    // One node field, or under contact one per body (material), each with its own transfer
+    // weights, VC correction, maps and grid update; a rigid body's nodes take its velocity.
+    let contact = sim.options.contact;
+    let bodies: Vec<Option<u32>> = match contact {
+        Some(_) => (0..sim.materials.len() as u32).map(Some).collect(),
+        None => vec![None],
     };
-    let affine = &ps.affine;
-    map_to_grid(
-        sim,
-        &stencils,
-        &ps.velocity,
-        affine,
-        Some((dt, &acceleration)),
-        vc.as_deref(),
-        &mut nodes,
-    );
+    let rigid: Vec<Option<Vector<D>>> = sim.materials.iter().map(|m| m.rigid_velocity()).collect();
     let largest_mass = ps.mass.iter().copied().fold(0.0, f64::max);
     let floored = signed || matches!(sim.options.shape, Shape::Linear);
     let mass_floor = if floored { 1e-10 * largest_mass } else { 0.0 };
-    update_grid(sim, &mut nodes, Some(dt), mass_floor);
+    let mut fields = Vec::new();
+    for &body in &bodies {
+        if signed {
+            blend_transfer_weights(sim, &mut stencils, body)?;
+        }
+        let mut nodes = GridNodes::<D>::default();
+        nodes.ensure(grid, false, contact.is_some(), signed || sim.vc.is_some())?;
+        let rigid_velocity = body.and_then(|b| rigid[b as usize]);
+        // VC's corrections, particle to grid, grid update.
+        let vc = match sim.vc {
+            Some(_) if rigid_velocity.is_none() => Some(vc_corrections(sim, &stencils, body)?),
+            _ => None,
+        };
+        let map = Map {
+            velocity: &ps.velocity,
+            affine: &ps.affine,
+            forces: Some((dt, &acceleration)),
+            vc: vc.as_deref(),
+            body,
+        };
+        map_to_grid(sim, &stencils, &map, &mut nodes);
+        update_grid(sim, &mut nodes, Some(dt), mass_floor);
+        if let Some(v) = rigid_velocity {
+            for k in 0..nodes.active.len() {
+                let n = nodes.active[k];
+                (nodes.velocity[n], nodes.velocity_old[n]) = (v, v);
+            }
+        }
+        fields.push(nodes);
+    }
+    if let Some(contact) = contact {
+        let shared: Vec<usize> = (0..grid.node_count())
+            .filter(|&n| fields.iter().filter(|f| f.is_touched(n)).count() > 1)
+            .collect();
+        crate::contact::correct_velocities(&contact, &mut fields, &rigid, &shared);
+    }
+    let field_of = |p: usize| match contact {
+        Some(_) => &fields[ps.material[p] as usize],
+        None => &fields[0],
+    };
 
     // Grid to particle.
     let (flip, apic, mls) = match sim.options.transfer {
@@ -470,7 +526,15 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         Vec::with_capacity(n),
     );
     for (p, s) in stencils.iter().enumerate() {
-        let (v_pic, dv, b, gradient) = gather(grid, s, &ps.position[p], &nodes);
+        if let Some(v_rigid) = rigid[ps.material[p] as usize] {
+            // A rigid body's particles move with it and keep their `F`.
+            x.push(ps.position[p] + dt * v_rigid);
+            v.push(v_rigid);
+            c.push(Matrix::zeros());
+            l.push(Matrix::zeros());
+            continue;
+        }
+        let (v_pic, dv, b, gradient) = gather(grid, s, &ps.position[p], field_of(p));
         x.push(ps.position[p] + dt * v_pic);
         v.push(match flip > 0.0 {
             true => (1.0 - flip) * v_pic + flip * (ps.velocity[p] + dv),
@@ -489,15 +553,24 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         l.push(lp);
     }
     if sim.options.scheme == crate::options::Scheme::Musl {
-        // The new momenta to the grid again; the velocity gradient from those velocities.
+        // The new momenta to the grid again; the velocity gradient from those velocities (one
+        // field: contact runs under USL only).
+        let nodes = &mut fields[0];
         for &k in &nodes.active {
             nodes.momentum[k] = Vector::zeros();
         }
         let new_affine = if apic { c.clone() } else { Vec::new() };
-        map_to_grid(sim, &stencils, &v, &new_affine, None, None, &mut nodes);
-        update_grid(sim, &mut nodes, None, mass_floor);
+        let map = Map {
+            velocity: &v,
+            affine: &new_affine,
+            forces: None,
+            vc: None,
+            body: None,
+        };
+        map_to_grid(sim, &stencils, &map, nodes);
+        update_grid(sim, nodes, None, mass_floor);
         for (p, s) in stencils.iter().enumerate() {
-            let (_, _, b, gradient) = gather(grid, s, &ps.position[p], &nodes);
+            let (_, _, b, gradient) = gather(grid, s, &ps.position[p], nodes);
             l[p] = match (mls, inverse_inertia) {
                 (true, Some(inv)) => b * inv,
                 _ => gradient,
@@ -571,6 +644,8 @@ mod tests {
         material: usize,
         body_force: bool,
         vc: bool,
+        /// 0: one body; 1: two deformable bodies in contact; 2: a deformable and a rigid one.
+        contact: usize,
     }
 
     fn cases() -> impl Strategy<Value = Case> {
@@ -583,10 +658,20 @@ mod tests {
             prop::array::uniform6(0..4usize),
             0..3usize,
             any::<bool>(),
-            any::<bool>(),
+            (any::<bool>(), 0..3usize),
         )
             .prop_map(
-                |(seed, shape, transfer, flip, musl, walls, material, body_force, vc)| Case {
+                |(
+                    seed,
+                    shape,
+                    transfer,
+                    flip,
+                    musl,
+                    walls,
+                    material,
+                    body_force,
+                    (vc, contact),
+                )| Case {
                     seed,
                     shape,
                     transfer,
@@ -596,6 +681,7 @@ mod tests {
                     material,
                     body_force,
                     vc,
+                    contact,
                 },
             )
     }
@@ -632,7 +718,15 @@ mod tests {
         if case.vc {
             sim.set_integration(Integration::Vc { order: 1 }).unwrap();
         }
-        let scheme = if case.musl { Scheme::Musl } else { Scheme::Usl };
+        // Contact runs under USL only.
+        let scheme = if case.musl && case.contact == 0 {
+            Scheme::Musl
+        } else {
+            Scheme::Usl
+        };
+        if case.contact > 0 {
+            sim.set_contact(Some(0.3)).unwrap();
+        }
         sim.set_scheme(scheme).unwrap();
         for a in 0..D {
             for (k, side) in [Side::Low, Side::High].into_iter().enumerate() {
@@ -663,13 +757,24 @@ mod tests {
             _ => Material::drucker_prager(1000.0, 1e5, 0.3, 30.0, 50.0, 0.0),
         };
         let id = sim.add_material(material.unwrap());
+        // Under contact the particles beyond the middle of the block along x are a second body.
+        let second = match case.contact {
+            0 => id,
+            1 => sim.add_material(Material::neo_hookean(800.0, 5e4, 0.25).unwrap()),
+            _ => sim.add_material(Material::rigid(2000.0, [0.3, -0.2, 0.1]).unwrap()),
+        };
         // Two particles per cell over the lower half of the grid, jittered by ±20 % of their
         // spacing, on the low faces' first cells.
         let q = h / 2.0;
         let per_axis = cells;
         let mut rng = UniformRng::new(case.seed);
-        let (mut x, mut v) = (Vec::new(), Vec::new());
+        let (mut x, mut v, mut body) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..per_axis.pow(D as u32) {
+            body.push(if k % per_axis < per_axis / 2 {
+                id
+            } else {
+                second
+            });
             let mut xp = Vector::<D>::zeros();
             let mut rest = k;
             for a in 0..D {
@@ -680,8 +785,20 @@ mod tests {
             x.push(xp);
             v.push(Vector::<D>::from_fn(|_, _| rng.uniform() - 0.5));
         }
-        let volumes = vec![q.powi(D as i32); x.len()];
-        sim.add_particles(id, &x, &volumes, Some(&v)).unwrap();
+        for material in [id, second] {
+            let of = |values: &[Vector<D>]| -> Vec<Vector<D>> {
+                (0..values.len())
+                    .filter(|&p| body[p] == material)
+                    .map(|p| values[p])
+                    .collect()
+            };
+            let (x, v) = (of(&x), of(&v));
+            let volumes = vec![q.powi(D as i32); x.len()];
+            sim.add_particles(material, &x, &volumes, Some(&v)).unwrap();
+            if second == id {
+                break;
+            }
+        }
         sim
     }
 
