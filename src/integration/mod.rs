@@ -88,6 +88,23 @@ pub(crate) const VC_MAX_CORRECTION: f64 = 1e3;
 /// Test polynomials at most (order 4 in 3D: the monomials of degree ≤ 3).
 const MAX_BASIS: usize = 20;
 
+/// What VC's correction of one step reads.
+#[derive(Clone, Copy)]
+pub struct VcInputs<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    /// The particles binned for this step (the colours of the parallel node sums).
+    pub bins: &'a Bins<D>,
+    /// The particles' positions and current volumes, and their stored stencils.
+    pub positions: &'a [Vector<D>],
+    pub volumes: &'a [f64],
+    pub stencils: &'a Stencils<D>,
+    /// The boundary points (under contact the body's own surface) and their stencils.
+    pub boundary: &'a BoundaryPoints<D>,
+    pub boundary_stencils: &'a Stencils<D>,
+    /// Under contact `(materials, b)`: only the particles of material `b` count.
+    pub body: Option<(&'a [u32], u32)>,
+}
+
 /// The per-node gradient corrections of one step.
 #[derive(Debug, Clone)]
 pub struct VcCorrection<const D: usize> {
@@ -156,25 +173,21 @@ impl<const D: usize> VcCorrection<D> {
 
     /// Computes `ξ_I` for every node touched by a particle: the particle sums over their
     /// stencils, the boundary sums over the stencils of the boundary points. Marks the nodes
-    /// active in `nodes`. With `body = Some((materials, b))` (contact: one field per body) only
-    /// the particles of material `b` count, and `boundary` is that body's surface.
+    /// active in `nodes`.
     ///
-    /// The particle sums run in parallel by the colours of `bins` (the particles of `positions`
-    /// binned for this step), the per-node solves in parallel: the same bits with any number of
-    /// threads.
-    #[allow(clippy::too_many_arguments)]
-    pub fn compute(
-        &mut self,
-        grid: &Grid<D>,
-        bins: &Bins<D>,
-        positions: &[Vector<D>],
-        volumes: &[f64],
-        stencils: &Stencils<D>,
-        boundary: &BoundaryPoints<D>,
-        boundary_stencils: &Stencils<D>,
-        nodes: &mut GridNodes<D>,
-        body: Option<(&[u32], u32)>,
-    ) {
+    /// The particle sums run in parallel by the colours of `bins` (the particles binned for
+    /// this step), the per-node solves in parallel: the same bits with any number of threads.
+    pub fn compute(&mut self, inputs: &VcInputs<'_, D>, nodes: &mut GridNodes<D>) {
+        let VcInputs {
+            grid,
+            bins,
+            positions,
+            volumes,
+            stencils,
+            boundary,
+            boundary_stencils,
+            body,
+        } = *inputs;
         let m = self.m();
         let h = grid.cell_size;
         let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
@@ -294,7 +307,7 @@ impl<const D: usize> VcCorrection<D> {
                 }
             }
         }
-        self.solve_conserving(grid, bins, positions, volumes, stencils, nodes, body);
+        self.solve_conserving(inputs, nodes);
     }
 
     /// Solves for the node coefficients `ζ` of the momentum-conserving correction
@@ -307,17 +320,16 @@ impl<const D: usize> VcCorrection<D> {
     /// (a polynomial of degree < n over a whole body): the part of `rhs` along them is what no
     /// force-free correction can meet (a surface whose quadrature disagrees with the particles'
     /// divergence theorem), projected out first.
-    #[allow(clippy::too_many_arguments)]
-    fn solve_conserving(
-        &mut self,
-        grid: &Grid<D>,
-        bins: &Bins<D>,
-        positions: &[Vector<D>],
-        volumes: &[f64],
-        stencils: &Stencils<D>,
-        nodes: &GridNodes<D>,
-        body: Option<(&[u32], u32)>,
-    ) {
+    fn solve_conserving(&mut self, inputs: &VcInputs<'_, D>, nodes: &GridNodes<D>) {
+        let VcInputs {
+            grid,
+            bins,
+            positions,
+            volumes,
+            stencils,
+            body,
+            ..
+        } = *inputs;
         let m = self.m();
         let slots = nodes.active.len();
         let len = slots * m * D;

@@ -39,7 +39,6 @@ impl<const D: usize> NodeOperator<D> {
     /// Assembles `K` from the particles that `counted` admits, visited by the colours of `bins`
     /// (blocks of one colour write disjoint rows: the same bits with any number of threads).
     /// `moment[slot]` is `A_I`. `None` when the stencils are not a box of `w^D` nodes.
-    #[allow(clippy::too_many_arguments)]
     pub fn assemble(
         grid: &Grid<D>,
         bins: &Bins<D>,

@@ -94,17 +94,17 @@ fn correction<const D: usize>(
     let mut vc = VcCorrection::<D>::new(order).unwrap();
     vc.matrix_free = solve == Solve::MatrixFree;
     vc.multilevel = solve == Solve::Multilevel;
-    vc.compute(
+    let inputs = VcInputs {
         grid,
-        &work.bins,
-        &ps.position,
+        bins: &work.bins,
+        positions: &ps.position,
         volumes,
-        &work.stencils,
-        &sim.boundary,
-        &work.boundary_stencils,
-        &mut work.nodes,
-        None,
-    );
+        stencils: &work.stencils,
+        boundary: &sim.boundary,
+        boundary_stencils: &work.boundary_stencils,
+        body: None,
+    };
+    vc.compute(&inputs, &mut work.nodes);
     vc
 }
 

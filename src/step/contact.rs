@@ -7,7 +7,7 @@ use super::profile::lap;
 use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs};
 use crate::error::Result;
 use crate::grid::GridNodes;
-use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use crate::options::Contact;
 use crate::shape::{StencilView, Stencils};
 
@@ -75,17 +75,17 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
                 let surface = super::surface::found_surface(grid, ps, Some(b as u32))?;
                 times.surface += lap(&mut clock);
                 boundary_stencils.compute(shape, grid, &surface.position);
-                vc.compute(
+                let vc_inputs = VcInputs {
                     grid,
                     bins,
-                    &ps.position,
+                    positions: &ps.position,
                     volumes,
-                    stored.expect("VC runs with stored stencils"),
-                    &surface,
+                    stencils: stored.expect("VC runs with stored stencils"),
+                    boundary: &surface,
                     boundary_stencils,
-                    nodes,
-                    Some((&ps.material, b as u32)),
-                );
+                    body: Some((&ps.material, b as u32)),
+                };
+                vc.compute(&vc_inputs, nodes);
                 surfaces.add(&surface.position, &surface.area_normal, None)?;
                 times.forces_and_vc += lap(&mut clock);
                 Some(&*vc)

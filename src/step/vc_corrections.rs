@@ -7,7 +7,7 @@ use super::profile::lap;
 use super::surface::found_surface;
 use super::{StepInputs, Workspace};
 use crate::error::Result;
-use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use crate::shape::StencilView;
 
 /// Sets up the boundary points the step needs (VC or tractions) and computes the VC
@@ -54,17 +54,17 @@ pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
         }
     }
     if let Some(vc) = vc.as_mut().filter(|_| contact.is_none()) {
-        vc.compute(
+        let vc_inputs = VcInputs {
             grid,
-            inputs.bins,
-            &ps.position,
-            &work.volumes,
-            inputs.stored.expect("VC runs with stored stencils"),
+            bins: inputs.bins,
+            positions: &ps.position,
+            volumes: &work.volumes,
+            stencils: inputs.stored.expect("VC runs with stored stencils"),
             boundary,
-            &work.boundary_stencils,
-            &mut work.nodes,
-            None,
-        );
+            boundary_stencils: &work.boundary_stencils,
+            body: None,
+        };
+        vc.compute(&vc_inputs, &mut work.nodes);
     }
     work.times.forces_and_vc += lap(&mut clock);
     Ok(found)
