@@ -13,10 +13,10 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rkmpm::grid::{Grid, GridNodes};
-use rkmpm::integration::{BoundaryPoints, VcCorrection};
+use rkmpm::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use rkmpm::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use rkmpm::step::{grid_to_particle, grid_update, particle_to_grid, Bins, Fields, Forces};
-use rkmpm::step::{NewState, NoFinish, TransferPlan};
+use rkmpm::step::{FromGrid, NewState, NoFinish, ToGrid, TransferPlan};
 use rkmpm::walls::Walls;
 use rkmpm::{Material, Particles, Shape, Sim, Vector};
 use std::time::Duration;
@@ -62,12 +62,15 @@ fn p2g<const D: usize, S: StencilView<D>>(
     nodes: &mut GridNodes<D>,
 ) {
     nodes.reset();
-    particle_to_grid(
+    let to = ToGrid {
         grid,
-        ps,
+        particles: ps,
         bins,
         stencils,
-        None,
+        shape: None,
+    };
+    particle_to_grid(
+        &to,
         |p| ps.velocity[p],
         Some(|p: usize| ps.affine[p]),
         Some(forces),
@@ -157,19 +160,16 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         };
         g.bench_function(BenchmarkId::new("g2p", name), |b| {
             b.iter(|| {
-                grid_to_particle(
-                    &grid,
-                    &ps,
-                    &factors.local(),
-                    Fields::One(&nodes),
-                    &[None],
+                let from = FromGrid {
+                    grid: &grid,
+                    particles: &ps,
+                    stencils: &factors.local(),
+                    fields: Fields::One(&nodes),
+                    rigid: &[None],
                     plan,
                     dt,
-                    None::<&NoFinish>,
-                    None,
-                    &mut new,
-                    &mut admissible,
-                )
+                };
+                grid_to_particle(&from, None::<&NoFinish>, None, &mut new, &mut admissible)
             })
         });
     }
@@ -187,17 +187,17 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     g.bench_function(BenchmarkId::new("vc", "bspline2 order 1"), |b| {
         b.iter(|| {
             nodes.reset();
-            vc.compute(
-                &grid,
-                &bins,
-                &ps.position,
-                &volumes,
-                &stored,
-                &boundary,
-                &boundary_stencils,
-                &mut nodes,
-                None,
-            )
+            let inputs = VcInputs {
+                grid: &grid,
+                bins: &bins,
+                positions: &ps.position,
+                volumes: &volumes,
+                stencils: &stored,
+                boundary: &boundary,
+                boundary_stencils: &boundary_stencils,
+                body: None,
+            };
+            vc.compute(&inputs, &mut nodes)
         })
     });
     // Particle to grid with stored stencils, for the ratio against the factors.

@@ -4,7 +4,7 @@
 //! the contact correction ([`crate::contact::correct_velocities`]).
 
 use super::profile::lap;
-use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs};
+use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs, ToGrid};
 use crate::error::Result;
 use crate::grid::GridNodes;
 use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
@@ -92,12 +92,15 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
             }
             None => None,
         };
-        let largest_mass = particle_to_grid(
+        let to = ToGrid {
             grid,
-            ps,
+            particles: ps,
             bins,
             stencils,
-            stored,
+            shape: stored,
+        };
+        let largest_mass = particle_to_grid(
+            &to,
             velocity,
             affine,
             Some(Forces { vc, ..forces }),

@@ -364,6 +364,19 @@ impl<'a, const D: usize> Fields<'a, D> {
     }
 }
 
+/// What grid to particle reads: the particles, their stencils, the grid fields after the grid
+/// update, each material's rigid velocity (`None` for a deformable one), the transfer and `Δt`.
+#[derive(Clone, Copy)]
+pub struct FromGrid<'a, const D: usize, S> {
+    pub grid: &'a Grid<D>,
+    pub particles: &'a Particles<D>,
+    pub stencils: &'a S,
+    pub fields: Fields<'a, D>,
+    pub rigid: &'a [Option<Vector<D>>],
+    pub plan: TransferPlan,
+    pub dt: f64,
+}
+
 /// Gathers the new velocity, affine matrix and position of every particle, and under USL its new
 /// deformation gradient `(I + Δt L) F` (under MUSL that waits for the second map). Particles of
 /// a rigid material (`rigid[material]` is its velocity) move with it and keep their `F`.
@@ -379,15 +392,8 @@ impl<'a, const D: usize> Fields<'a, D> {
 /// receives that (true for every particle without `finish`). The new states go to `new`.
 /// Returns the largest signal speed `finish` gave (0 without `finish`) and whether every new
 /// state is admissible (so that the checks scan `admissible` only when one is not).
-#[allow(clippy::too_many_arguments)]
-pub fn grid_to_particle<const D: usize, F>(
-    grid: &Grid<D>,
-    ps: &Particles<D>,
-    stencils: &impl StencilView<D>,
-    fields: Fields<'_, D>,
-    rigid: &[Option<Vector<D>>],
-    plan: TransferPlan,
-    dt: f64,
+pub fn grid_to_particle<const D: usize, F, S>(
+    from: &FromGrid<'_, D, S>,
     finish: Option<&F>,
     source: Option<&[u32]>,
     new: &mut NewState<D>,
@@ -395,33 +401,27 @@ pub fn grid_to_particle<const D: usize, F>(
 ) -> (f64, bool)
 where
     F: Finish<D>,
+    S: StencilView<D>,
 {
     if let Some(source) = source {
-        assert_eq!(source.len(), ps.len(), "a permutation of the particles");
+        assert_eq!(
+            source.len(),
+            from.particles.len(),
+            "a permutation of the particles"
+        );
     }
     // One compiled pass per case: MLS takes no gradient sum. (One per `source` too made no
     // measurable difference; BENCHMARKS.md.)
-    if plan.mls {
-        gather_all::<true, D, F>(
-            grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,
-        )
+    if from.plan.mls {
+        gather_all::<true, D, F, S>(from, finish, source, new, admissible)
     } else {
-        gather_all::<false, D, F>(
-            grid, ps, stencils, fields, rigid, plan, dt, finish, source, new, admissible,
-        )
+        gather_all::<false, D, F, S>(from, finish, source, new, admissible)
     }
 }
 
 /// [`grid_to_particle`] with `MLS = plan.mls`.
-#[allow(clippy::too_many_arguments)]
-fn gather_all<const MLS: bool, const D: usize, F>(
-    grid: &Grid<D>,
-    ps: &Particles<D>,
-    stencils: &impl StencilView<D>,
-    fields: Fields<'_, D>,
-    rigid: &[Option<Vector<D>>],
-    plan: TransferPlan,
-    dt: f64,
+fn gather_all<const MLS: bool, const D: usize, F, S>(
+    from: &FromGrid<'_, D, S>,
     finish: Option<&F>,
     source: Option<&[u32]>,
     new: &mut NewState<D>,
@@ -429,7 +429,17 @@ fn gather_all<const MLS: bool, const D: usize, F>(
 ) -> (f64, bool)
 where
     F: Finish<D>,
+    S: StencilView<D>,
 {
+    let FromGrid {
+        grid,
+        particles: ps,
+        stencils,
+        fields,
+        rigid,
+        plan,
+        dt,
+    } = *from;
     new.prepare(ps, plan.apic);
     let flip = plan.flip > 0.0;
     let update_deformation = finish.is_some();

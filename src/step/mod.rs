@@ -51,11 +51,11 @@ pub use profile::{MemoryUse, PhaseTimes};
 pub use crate::grid::{Bins, BlockLayout};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use grid_to_particle::{
-    grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, NewState,
+    grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, FromGrid, NewState,
     NewStateWriter, NoFinish, ParticleUpdate,
 };
 pub use grid_update::grid_update;
-pub use particle_to_grid::{particle_to_grid, Forces};
+pub use particle_to_grid::{particle_to_grid, Forces, ToGrid};
 
 use crate::cpu::Lanes;
 use crate::error::Result;
@@ -494,11 +494,13 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
     }
     let mass_floor = mass_floor_fraction
         * particle_to_grid(
-            grid,
-            ps,
-            inputs.bins,
-            inputs.stencils,
-            inputs.stored,
+            &ToGrid {
+                grid,
+                particles: ps,
+                bins: inputs.bins,
+                stencils: inputs.stencils,
+                shape: inputs.stored,
+            },
             velocity,
             affine_map,
             Some(forces),
@@ -561,14 +563,17 @@ fn grid_to_particle_and_update<const D: usize, S: StencilView<D>>(
         Some(_) => Fields::PerBody(&work.bodies.nodes, &ps.material),
         None => Fields::One(&work.nodes),
     };
-    let (mut speed, mut all_admissible) = grid_to_particle(
+    let from = FromGrid {
         grid,
-        ps,
-        inputs.stencils,
+        particles: ps,
+        stencils: inputs.stencils,
         fields,
-        inputs.rigid,
-        inputs.plan,
+        rigid: inputs.rigid,
+        plan: inputs.plan,
         dt,
+    };
+    let (mut speed, mut all_admissible) = grid_to_particle(
+        &from,
         usl.then_some(&finish),
         source,
         &mut new,

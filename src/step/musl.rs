@@ -3,7 +3,7 @@
 //! each particle's `F` comes from those grid velocities rather than from the grid update's.
 
 use super::{grid_update, mls_velocity_gradient, particle_to_grid, velocity_gradient};
-use super::{NewState, StepInputs};
+use super::{NewState, StepInputs, ToGrid};
 use crate::grid::GridNodes;
 use crate::shape::StencilView;
 use crate::{Matrix, Vector};
@@ -33,12 +33,15 @@ pub(super) fn second_map<const D: usize, S: StencilView<D>>(
     }
     let v = &new.velocity[..];
     let velocity = move |p: usize| v[p];
-    particle_to_grid(
+    let to = ToGrid {
         grid,
-        ps,
+        particles: ps,
         bins,
         stencils,
-        None,
+        shape: None,
+    };
+    particle_to_grid(
+        &to,
         velocity,
         plan.apic.then_some({
             let c = &new.affine[..];

@@ -27,10 +27,21 @@ pub struct Forces<'a, const D: usize> {
     pub mls: Option<(f64, f64)>,
 }
 
+/// The particles as a map to the grid reads them.
+#[derive(Clone, Copy)]
+pub struct ToGrid<'a, const D: usize, S> {
+    pub grid: &'a Grid<D>,
+    pub particles: &'a Particles<D>,
+    /// The particles binned by grid block (the map's schedule).
+    pub bins: &'a Bins<D>,
+    pub stencils: &'a S,
+    /// The stored stencils, whose values `Ψ` weigh VC's correction where the transfer weights
+    /// differ from them (signed shape functions).
+    pub shape: Option<&'a Stencils<D>>,
+}
+
 /// Scatters particle quantities to the nodes of their stencils and marks those nodes active.
 ///
-/// * `shape`: the stored stencils, whose values `Ψ` weigh VC's correction where the transfer
-///   weights differ from them (signed shape functions).
 /// * `velocity(p)` and `affine(p)` give the velocity and, under APIC, `C_p` to map (the
 ///   particle's own, or the updated ones in the second map of MUSL).
 /// * `forces`: `Some(..)` also accumulates mass and force; `None` maps momentum only.
@@ -43,13 +54,8 @@ pub struct Forces<'a, const D: usize> {
 /// Returns the largest mass of the particles (of all of them, whichever `body` maps), which the
 /// grid update's mass floor needs: taken here, where each particle's mass is read anyway, it
 /// saves a separate pass over the masses (a serial chain of `max`).
-#[allow(clippy::too_many_arguments)]
 pub fn particle_to_grid<const D: usize, S, A>(
-    grid: &Grid<D>,
-    ps: &Particles<D>,
-    bins: &Bins<D>,
-    stencils: &S,
-    shape: Option<&Stencils<D>>,
+    to: &ToGrid<'_, D, S>,
     velocity: impl Fn(usize) -> Vector<D> + Sync + Copy,
     affine: Option<A>,
     forces: Option<Forces<D>>,
@@ -60,6 +66,13 @@ where
     S: StencilView<D>,
     A: Fn(usize) -> Matrix<D> + Sync + Copy,
 {
+    let ToGrid {
+        grid,
+        particles: ps,
+        bins,
+        stencils,
+        shape,
+    } = *to;
     let vc = forces.and_then(|f| f.vc);
     let out = NodeScatter::new(nodes);
     let with_gradient = !out.mass_gradient.is_null() && forces.is_some();
