@@ -197,7 +197,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 boundary_stencils: &boundary_stencils,
                 body: None,
             };
-            vc.compute(&inputs, &mut nodes)
+            vc.compute(inputs, &mut nodes)
         })
     });
     // Particle to grid with stored stencils, for the ratio against the factors.

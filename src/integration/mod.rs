@@ -177,7 +177,7 @@ impl<const D: usize> VcCorrection<D> {
     ///
     /// The particle sums run in parallel by the colours of `bins` (the particles binned for
     /// this step), the per-node solves in parallel: the same bits with any number of threads.
-    pub fn compute(&mut self, inputs: &VcInputs<'_, D>, nodes: &mut GridNodes<D>) {
+    pub fn compute(&mut self, inputs: VcInputs<'_, D>, nodes: &mut GridNodes<D>) {
         let VcInputs {
             grid,
             bins,
@@ -187,7 +187,7 @@ impl<const D: usize> VcCorrection<D> {
             boundary,
             boundary_stencils,
             body,
-        } = *inputs;
+        } = inputs;
         let m = self.m();
         let h = grid.cell_size;
         let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
@@ -320,7 +320,7 @@ impl<const D: usize> VcCorrection<D> {
     /// (a polynomial of degree < n over a whole body): the part of `rhs` along them is what no
     /// force-free correction can meet (a surface whose quadrature disagrees with the particles'
     /// divergence theorem), projected out first.
-    fn solve_conserving(&mut self, inputs: &VcInputs<'_, D>, nodes: &GridNodes<D>) {
+    fn solve_conserving(&mut self, inputs: VcInputs<'_, D>, nodes: &GridNodes<D>) {
         let VcInputs {
             grid,
             bins,
@@ -329,7 +329,7 @@ impl<const D: usize> VcCorrection<D> {
             stencils,
             body,
             ..
-        } = *inputs;
+        } = inputs;
         let m = self.m();
         let slots = nodes.active.len();
         let len = slots * m * D;

@@ -104,7 +104,7 @@ fn correction<const D: usize>(
         boundary_stencils: &work.boundary_stencils,
         body: None,
     };
-    vc.compute(&inputs, &mut work.nodes);
+    vc.compute(inputs, &mut work.nodes);
     vc
 }
 

@@ -85,7 +85,7 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
                     boundary_stencils,
                     body: Some((&ps.material, b as u32)),
                 };
-                vc.compute(&vc_inputs, nodes);
+                vc.compute(vc_inputs, nodes);
                 surfaces.add(&surface.position, &surface.area_normal, None)?;
                 times.forces_and_vc += lap(&mut clock);
                 Some(&*vc)

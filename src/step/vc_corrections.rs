@@ -64,7 +64,7 @@ pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
             boundary_stencils: &work.boundary_stencils,
             body: None,
         };
-        vc.compute(&vc_inputs, &mut work.nodes);
+        vc.compute(vc_inputs, &mut work.nodes);
     }
     work.times.forces_and_vc += lap(&mut clock);
     Ok(found)
