@@ -25,7 +25,7 @@ use std::time::Instant;
         no scene it runs the default one (two elastic disks collide). A scene is a TOML file (docs/SCENES.md lists every key) or the \
         name of a bundled scene (`rkmpm list`).",
     after_help = "Examples:\n  rkmpm                                  run the default scene into out/\n  \
-        rkmpm run runner/scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80 --png damage\n  \
+        rkmpm run runner/scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80 --png plastic_strain\n  \
         rkmpm check my_scene.toml               read and build a scene without running it\n  \
         rkmpm list                              the bundled scenes"
 )]

@@ -236,6 +236,10 @@ pub struct BodySpec {
     /// `velocity`.
     #[serde(default)]
     pub sine_velocity: Option<SineVelocity>,
+    /// Keep only the part of the shape inside the grid (a model cut by a symmetry wall on a grid
+    /// face). Without it a shape that reaches past the grid is refused.
+    #[serde(default)]
+    pub clip: bool,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -541,16 +545,24 @@ impl BodySpec {
             };
             return Ok((x, vol, v));
         }
-        let inside: Box<dyn Fn(&Vector<D>) -> bool> = if let Some(b) = &self.boxed {
+        // The shape, and the box that bounds it.
+        let (inside, bounds): (Box<dyn Fn(&Vector<D>) -> bool>, _) = if let Some(b) = &self.boxed {
             let (lo, hi) = (
                 vector::<D>("box.min", &b.min)?,
                 vector::<D>("box.max", &b.max)?,
             );
-            Box::new(move |x| (0..D).all(|a| x[a] >= lo[a] && x[a] <= hi[a]))
+            (
+                Box::new(move |x| (0..D).all(|a| x[a] >= lo[a] && x[a] <= hi[a])),
+                ("box", lo, hi),
+            )
         } else if let Some(s) = &self.sphere {
             let c = vector::<D>("sphere.center", &s.center)?;
             let r = s.radius;
-            Box::new(move |x| (x - c).norm() <= r)
+            let reach = Vector::<D>::from_element(r);
+            (
+                Box::new(move |x| (x - c).norm() <= r),
+                ("sphere", c - reach, c + reach),
+            )
         } else {
             let c = self.cylinder.as_ref().expect("one shape is given");
             let base = vector::<D>("cylinder.base", &c.base)?;
@@ -561,20 +573,50 @@ impl BodySpec {
                 )));
             }
             let (axis, r, len) = (c.axis, c.radius, c.length);
-            Box::new(move |x| {
-                let d = x - base;
-                let mut radial = d;
-                radial[axis] = 0.0;
-                d[axis] >= 0.0 && d[axis] <= len && radial.norm() <= r
-            })
+            let lo = Vector::<D>::from_fn(|a, _| if a == axis { base[a] } else { base[a] - r });
+            let hi = Vector::<D>::from_fn(|a, _| {
+                if a == axis {
+                    base[a] + len
+                } else {
+                    base[a] + r
+                }
+            });
+            (
+                Box::new(move |x| {
+                    let d = x - base;
+                    let mut radial = d;
+                    radial[axis] = 0.0;
+                    d[axis] >= 0.0 && d[axis] <= len && radial.norm() <= r
+                }),
+                ("cylinder", lo, hi),
+            )
         };
+        // A body that reaches past the grid is refused rather than clipped: the particles
+        // cut off would be lost silently.
+        let grid = sim.grid();
+        let (shape, lo, hi) = bounds;
+        let (origin, upper) = (grid.origin, grid.upper());
+        let slack = 1e-9 * grid.cell_size;
+        for a in (0..D).filter(|_| !self.clip) {
+            let (below, above) = (origin[a] - lo[a], hi[a] - upper[a]);
+            if below > slack || above > slack {
+                let (by, side, limit) = match below > slack {
+                    true => (below, "below", origin[a]),
+                    false => (above, "above", upper[a]),
+                };
+                return Err(Error::invalid(format!(
+                    "the {shape} reaches {by:.6e} past the grid on axis {a} ({side} {limit}): \
+                     move it, enlarge the grid (grid.cells, grid.origin), or keep the part \
+                     inside with clip = true"
+                )));
+            }
+        }
         let n = self.particles_per_cell;
         if n == 0 || n > 8 {
             return Err(Error::invalid(format!(
                 "particles_per_cell must lie in 1..=8, got {n}"
             )));
         }
-        let grid = sim.grid();
         let q = grid.cell_size / n as f64;
         let counts: [usize; D] = std::array::from_fn(|a| grid.cells[a] * n);
         let total: usize = counts.iter().product();
@@ -704,6 +746,32 @@ mod tests {
                     .unwrap_or_else(|e| panic!("{name}, [compare]: {e}"));
             }
         }
+    }
+
+    /// A shape that reaches past the grid is refused, naming the body, the axis and by how
+    /// much, unless the body says `clip = true`; the bundled scenes that cut a shape by a
+    /// symmetry wall say so.
+    #[test]
+    fn a_body_past_the_grid_is_refused_unless_clipped() {
+        let bar = BUNDLED.iter().find(|(n, _)| *n == "bar").unwrap().1;
+        let mut scene = Scene::from_toml(bar, "bar").unwrap();
+        let upper = scene.grid.origin[0] + scene.grid.cells[0] as f64 * scene.grid.cell_size;
+        let body = &mut scene.bodies[0];
+        let boxed = body.boxed.as_mut().expect("the bar is a box");
+        boxed.max[0] = upper + 0.25 * scene.grid.cell_size;
+        let Err(e) = scene.build() else {
+            panic!("a body past the grid was accepted")
+        };
+        assert!(e.message.contains("bodies[0]"), "{}", e.message);
+        assert!(
+            e.message.contains("the box reaches") && e.message.contains("on axis 0 (above"),
+            "{}",
+            e.message
+        );
+        let by = 0.25 * scene.grid.cell_size;
+        assert!(e.message.contains(&format!("{by:.6e}")), "{}", e.message);
+        scene.bodies[0].clip = true;
+        assert!(scene.build().is_ok(), "clipped to the grid");
     }
 
     /// The default scene compares the seed's method with the plain B-spline: `[compare]`
