@@ -41,7 +41,7 @@ impl<const D: usize> Sim<D> {
                 ErrorKind::UnstableTimeStep,
                 format!(
                     "dt = {dt:e} exceeds the critical time step h / max(c + |v|) = {critical:e} \
-                     (CFL {:.2}); use rkmpm_sim_stable_dt",
+                     (CFL {:.2}); take the stable time step (stable_dt) or a smaller one",
                     dt / critical
                 ),
             ));
@@ -146,7 +146,7 @@ impl<const D: usize> Sim<D> {
         {
             return Err(Error::new(
                 ErrorKind::Unsupported,
-                "a rigid material needs contact (rkmpm_sim_set_contact)",
+                "a rigid material needs contact between bodies (set_contact)",
             ));
         }
         if matches!(self.options.transfer, Transfer::Apic) && self.shape.reproduction_order() >= 2 {
@@ -156,7 +156,7 @@ impl<const D: usize> Sim<D> {
             return Err(Error::new(
                 ErrorKind::Unsupported,
                 "APIC with a shape function that reproduces quadratics (RK order >= 2) is unstable; \
-                 use RKMPM_TRANSFER_PIC_FLIP",
+                 use the PIC/FLIP transfer",
             ));
         }
         if self.options.transfer == Transfer::Mls {
@@ -164,15 +164,15 @@ impl<const D: usize> Sim<D> {
                 return Err(Error::new(
                     ErrorKind::Unsupported,
                     "the MLS transfer needs the quadratic or cubic B-spline shape function (a \
-                     constant APIC inertia); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP \
-                     with other shape functions",
+                     constant APIC inertia); use the APIC or PIC/FLIP transfer with other shape \
+                     functions",
                 ));
             }
             if self.vc.is_some() {
                 return Err(Error::new(
                     ErrorKind::Unsupported,
                     "the MLS transfer does not go with VC integration (MLS replaces the gradients \
-                     VC corrects); use RKMPM_TRANSFER_APIC or RKMPM_TRANSFER_PIC_FLIP with VC",
+                     VC corrects); use the APIC or PIC/FLIP transfer with VC",
                 ));
             }
         }
