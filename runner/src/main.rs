@@ -209,7 +209,7 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
     let o = sim.options();
     println!("scene: {}", scene.title);
     println!(
-        "{D}D, grid {} cells of {:e} m, {} particles, {} material{}; {}, {:?}",
+        "{D}D, grid {} cells of {:e} m, {} particles, {} material{}; {}, {}",
         g.cells
             .iter()
             .map(|c| c.to_string())
@@ -220,7 +220,10 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
         sim.materials().len(),
         if sim.materials().len() == 1 { "" } else { "s" },
         method(sim),
-        o.scheme
+        match o.scheme {
+            rkmpm::Scheme::Usl => "USL",
+            rkmpm::Scheme::Musl => "MUSL",
+        }
     );
 }
 

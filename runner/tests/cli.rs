@@ -67,7 +67,7 @@ fn the_default_scene_draws_both_runs_side_by_side() {
     ]);
     assert!(ok, "{stderr}");
     assert!(
-        stdout.contains("1 material; RK order 1, support 2, VC order 1, APIC, Usl"),
+        stdout.contains("1 material; RK order 1, support 2, VC order 1, APIC, USL"),
         "{stdout}"
     );
     assert!(
@@ -75,7 +75,7 @@ fn the_default_scene_draws_both_runs_side_by_side() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("1 material; quadratic B-spline, material points, APIC, Usl"),
+        stdout.contains("1 material; quadratic B-spline, material points, APIC, USL"),
         "{stdout}"
     );
     assert_eq!(stdout.matches("scene: ").count(), 2, "{stdout}");
