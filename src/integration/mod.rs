@@ -53,7 +53,7 @@ pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
 use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
-use crate::shape::{Monomials, StencilNode, Stencils};
+use crate::shape::{Monomials, Stencils};
 use crate::Vector;
 use nalgebra::{DMatrix, DVector};
 use node_operator::{Multilevel, NodeOperator};
@@ -190,7 +190,6 @@ impl<const D: usize> VcCorrection<D> {
         } = inputs;
         let m = self.m();
         let h = grid.cell_size;
-        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
@@ -208,7 +207,7 @@ impl<const D: usize> VcCorrection<D> {
             let out = NodeScatter::new(nodes);
             by_colour(&|p| {
                 stencils.for_each_shape(p, |_, s| {
-                    if in_support(&s) {
+                    if s.in_support() {
                         // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                         unsafe { out.touch(s.node) }
                     }
@@ -244,7 +243,7 @@ impl<const D: usize> VcCorrection<D> {
                 let (mut q, mut dq) = ([0.0; MAX_BASIS], [0.0; 3 * MAX_BASIS]);
                 let v = volumes[p];
                 stencils.for_each_shape(p, |_, s| {
-                    if !in_support(&s) {
+                    if !s.in_support() {
                         return;
                     }
                     let slot = nodes.slot(s.node);
@@ -398,7 +397,6 @@ impl<const D: usize> VcCorrection<D> {
                 });
         };
         // Per particle: how many nodes its support holds (the mean's divisor).
-        let in_support = |s: &StencilNode<D>| s.value != 0.0 || s.gradient != Vector::<D>::zeros();
         let h = grid.cell_size;
         let basis = &self.basis;
         let q_of = |p: usize, n: usize, q: &mut [f64]| {
@@ -422,7 +420,7 @@ impl<const D: usize> VcCorrection<D> {
                 let mut q = [0.0; MAX_BASIS];
                 let mut weight = 0.0;
                 stencils.for_each_shape(p, |_, s| {
-                    if !in_support(&s) {
+                    if !s.in_support() {
                         return;
                     }
                     let w = s.value.abs();
@@ -468,7 +466,7 @@ impl<const D: usize> VcCorrection<D> {
                         }
                         let v = volumes[p];
                         stencils.for_each_shape(p, |_, s| {
-                            if !in_support(&s) {
+                            if !s.in_support() {
                                 return;
                             }
                             let v = v * s.value.abs();
@@ -501,7 +499,7 @@ impl<const D: usize> VcCorrection<D> {
         let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
             if counted(p) {
                 stencils.for_each_shape(p, |_, s| {
-                    if in_support(&s) {
+                    if s.in_support() {
                         visit(nodes.slot(s.node));
                     }
                 });

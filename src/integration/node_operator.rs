@@ -89,8 +89,6 @@ impl<const D: usize> NodeOperator<D> {
         let mut dense = vec![0.0; slots * block];
         {
             let rows = SharedSlice::new(&mut dense);
-            let in_support =
-                |w: f64, g: &crate::Vector<D>| w != 0.0 || *g != crate::Vector::<D>::zeros();
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
                     let mut w = vec![0.0; len];
@@ -104,7 +102,7 @@ impl<const D: usize> NodeOperator<D> {
                         let (ns, vs, gs) = stencils.of(p);
                         let mut total = 0.0;
                         for s in 0..len {
-                            w[s] = if in_support(vs[s], &gs[s]) {
+                            w[s] = if crate::shape::in_support(vs[s], &gs[s]) {
                                 row[s] = nodes.slot(ns[s]);
                                 vs[s].abs()
                             } else {

@@ -77,6 +77,20 @@ pub struct StencilNode<const D: usize> {
     pub gradient: Vector<D>,
 }
 
+impl<const D: usize> StencilNode<D> {
+    /// Whether the node is in the particle's support: its value or its gradient is not zero.
+    #[inline(always)]
+    pub fn in_support(&self) -> bool {
+        in_support(self.value, &self.gradient)
+    }
+}
+
+/// Whether a node with value `w` and gradient `g` at a particle is in its support.
+#[inline(always)]
+pub fn in_support<const D: usize>(w: f64, g: &Vector<D>) -> bool {
+    w != 0.0 || *g != Vector::<D>::zeros()
+}
+
 /// The stencils of all particles of a step, visited node by node.
 pub trait StencilView<const D: usize>: Sync {
     /// The view as plain values (slices and scalars) that a phase copies into each parallel

@@ -9,13 +9,13 @@
 //! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material,
 //! material-point integration and VC of order 1 over the surface found from the particles. The
 //! wall conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`), the stresses
-//! the materials' own, the contact law `contact::correct_velocities`'s and the found surface
-//! `BoundaryPoints::of_particles`'s: the oracle is for the schedule, the data layout and VC's
-//! solve, not for those. VC's correction is solved here densely (a Cholesky factor of the node
+//! the materials' own, the edge-lumping node weights `EdgeLumping::blend`'s, the contact law
+//! `contact::correct_velocities`'s and the found surface `BoundaryPoints::of_particles`'s: the
+//! oracle is for the schedule, the data layout and VC's solve, not for those. VC's correction is solved here densely (a Cholesky factor of the node
 //! system with its null space added), where the fast step runs preconditioned conjugate
 //! gradients.
 
-use crate::grid::{Grid, GridNodes};
+use crate::grid::{EdgeLumping, Grid, GridNodes};
 use crate::integration::VC_MAX_CORRECTION;
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::options::{Shape, Transfer};
@@ -53,9 +53,8 @@ fn stencil<const D: usize>(sim: &Sim<D>, x: &Vector<D>) -> Stencil<D> {
     s
 }
 
-/// Signed shapes: each node's weight `θ_I`, a smooth step of `Σ m Ψ_I / Σ m L_I` from 0 at 1/4 to
-/// 1 at 3/4 (the node masses after the mirror walls folded their ghosts in; a ghost takes its
-/// mirror node's), and each particle's transfer weights `(θ_I Ψ_I + (1 − θ_I) L_I) / S_p`, or
+/// Signed shapes: each node's weight `θ_I` from `Σ m Ψ_I` and `Σ m L_I` ([`EdgeLumping::blend`],
+/// the masses after the mirror walls folded their ghosts in; a ghost takes its mirror node's), and each particle's transfer weights `(θ_I Ψ_I + (1 − θ_I) L_I) / S_p`, or
 /// `L_I` where `S_p ≤ 1/2`.
 fn blend_transfer_weights<const D: usize>(
     sim: &Sim<D>,
@@ -77,10 +76,7 @@ fn blend_transfer_weights<const D: usize>(
     let mut theta = vec![1.0; sim.grid.node_count()];
     let lumped = &nodes.lumping.as_ref().unwrap().mass;
     for &n in &nodes.active {
-        if lumped[n] > 0.0 {
-            let t = ((nodes.mass[n] / lumped[n] - 0.25) / 0.5).clamp(0.0, 1.0);
-            theta[n] = t * t * (3.0 - 2.0 * t);
-        }
+        theta[n] = EdgeLumping::blend(nodes.mass[n], lumped[n]);
     }
     sim.options
         .walls
@@ -109,7 +105,7 @@ fn node_position<const D: usize>(grid: &Grid<D>, n: usize) -> Vector<D> {
 
 /// Whether the `k`-th node of a stencil is in the particle's support.
 fn in_support<const D: usize>(s: &Stencil<D>, k: usize) -> bool {
-    s.values[k] != 0.0 || s.gradients[k] != Vector::<D>::zeros()
+    crate::shape::in_support(s.values[k], &s.gradients[k])
 }
 
 /// VC of order 1 (`crate::integration`): per particle and stencil node the correction
