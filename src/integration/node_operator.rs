@@ -1,51 +1,102 @@
-//! The conservative correction's system at order 1 assembled on the nodes.
+//! The conservative correction's system assembled on the nodes, and its multilevel
+//! preconditioner.
 //!
-//! At order 1 (`Q = 1`) the operator of [`super::VcCorrection`]'s solve is
+//! With `m` test polynomials per node (`Q = 1` at order 1; `1, z_1, …, z_D` at order 2, `z`
+//! written in `(x − x_I)/h`) the operator of [`super::VcCorrection`]'s solve is, per direction,
 //!
 //! ```text
-//! (K ζ)_I = A_I ζ_I − Σ_J B_IJ ζ_J,   A_I = Σ_p V_p w_Ip,   B_IJ = Σ_p V_p w_Ip w_Jp / W_p
+//! (K ζ)_I = A_I ζ_I − Σ_J B_IJ ζ_J,   A_I = Σ_p V_p w_Ip Q_I Q_Iᵀ,
+//! B_IJ = Σ_p V_p w_Ip w_Jp / W_p Q_I(x_p) Q_J(x_p)ᵀ
 //! ```
 //!
-//! (`w_Ip = |Ψ_I(x_p)|`, `W_p = Σ_J w_Jp`), the same for every direction. Applied matrix-free it
-//! takes a gather and a scatter over every particle's stencil per conjugate-gradient iteration;
-//! assembled once per step (one pass over the particles' stencil pairs), an iteration costs a
-//! product with a sparse matrix of `(2w − 1)^D` entries per node, `w` nodes per axis of a
-//! stencil: a few per particle instead of two stencil passes. On wide grids [`Multilevel`]
-//! preconditions it, so that the iterations stop growing with the grid's width.
+//! (`w_Ip = |Ψ_I(x_p)|`, `W_p = Σ_J w_Jp`), an `m × m` block per pair of nodes. Applied
+//! matrix-free it takes a gather and a scatter over every particle's stencil per
+//! conjugate-gradient iteration; assembled once per step (one pass over the particles' stencil
+//! pairs), an iteration costs a product with a sparse block matrix of `(2w − 1)^D` blocks per
+//! node, `w` nodes per axis of a stencil. [`Multilevel`] preconditions it, so that the
+//! iterations stop growing with the grid's width.
 
 use crate::grid::{Bins, Grid, GridNodes, SharedSlice};
 use crate::shape::Stencils;
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-/// `K` of order 1 on the active nodes (slots): per slot a row of at most `(2w − 1)^D` entries,
-/// packed at the front of its block of that length.
+/// The assembled system is used when it holds at most this many values (about 0.5 GB, twice
+/// while it is assembled); larger ones (RK of order 2 in 3D on wide grids, whose `6^3`-node
+/// stencils give rows of `11^3` blocks of `4 × 4`) are applied matrix-free.
+const MAX_ASSEMBLED_VALUES: usize = 1 << 26;
+
+/// `K` on the active nodes (slots): per slot a row of at most `(2w − 1)^D` blocks of `m × m`
+/// values, packed at the front of its room of that many blocks.
 pub(crate) struct NodeOperator<const D: usize> {
     /// Per row: the lattice multi-index of its node (of its aggregate on coarse levels).
     index: Vec<[i64; D]>,
-    /// Per row: the diagonal entry.
+    /// Test polynomials per node.
+    m: usize,
+    /// Per row: the diagonal block, `m × m` by rows. Its first entry (the constant
+    /// polynomial's) is zero for a row without particles, which takes no part.
     diagonal: Vec<f64>,
+    /// Per row (`m > 1`): the moment matrix `A_I` (on coarse levels `Σ Pᵀ A P` over the
+    /// aggregate), `m × m` by rows, which bounds the row's part of `K` from above.
+    moment: Vec<f64>,
+    /// Per row (`m > 1`): the inverse of `moment` that the smoother applies, or of its constant
+    /// entry alone where it is singular (see [`block_inverse`]).
+    inverse: Vec<f64>,
     /// How far (in nodes of this level, per axis) a row's columns reach.
     radius: usize,
-    /// Entries a row's block holds, `(2 radius + 1)^D`.
+    /// Blocks a row's room holds, `(2 radius + 1)^D`.
     block: usize,
-    /// Per slot: how many entries its row has.
+    /// Per slot: how many blocks its row has.
     count: Vec<u32>,
-    /// Per row block: the column slots, then the values.
+    /// Per row room: the column slots, then the blocks.
     column: Vec<u32>,
     value: Vec<f64>,
+}
+
+/// The inverse that a row's smoothing step applies: of its moment block `d` (`m × m`), or,
+/// where that block is singular for the order (a node whose support holds too few particles,
+/// as [`super::VC_MIN_RELATIVE_EIGENVALUE`] decides for the moment matrices), of its constant
+/// entry alone.
+fn block_inverse(d: &[f64], m: usize) -> Vec<f64> {
+    let mut out = vec![0.0; m * m];
+    if d[0] <= 0.0 {
+        return out;
+    }
+    let a = DMatrix::from_row_slice(m, m, d);
+    let eig = a.clone().symmetric_eigenvalues();
+    match (eig.min() > super::VC_MIN_RELATIVE_EIGENVALUE * eig.max())
+        .then(|| a.cholesky())
+        .flatten()
+    {
+        Some(c) => {
+            let inv = c.inverse();
+            for i in 0..m {
+                for j in 0..m {
+                    out[i * m + j] = inv[(i, j)];
+                }
+            }
+        }
+        None => out[0] = 1.0 / d[0],
+    }
+    out
 }
 
 impl<const D: usize> NodeOperator<D> {
     /// Assembles `K` from the particles that `counted` admits, visited by the colours of `bins`
     /// (blocks of one colour write disjoint rows: the same bits with any number of threads).
-    /// `moment[slot]` is `A_I`. `None` when the stencils are not a box of `w^D` nodes.
+    /// `moment[slot]` is `A_I` (`m × m`), `basis(p, node, q)` writes `Q_I(x_p)`. The
+    /// polynomials of degree ≥ 1 of a `reduced` node (corrected to order 1 only) are left out:
+    /// their rows and columns are zero. `None` when the stencils are not a box of `w^D` nodes,
+    /// or the system would hold more than `MAX_ASSEMBLED_VALUES` values.
+    #[allow(clippy::too_many_arguments)]
     pub fn assemble(
         grid: &Grid<D>,
         bins: &Bins<D>,
         stencils: &Stencils<D>,
         nodes: &GridNodes<D>,
         volumes: &[f64],
-        moment: &[f64],
+        (moment, reduced, m): (&[f64], &[bool], usize),
+        basis: impl Fn(usize, usize, &mut [f64]) + Sync,
         counted: impl Fn(usize) -> bool + Sync,
     ) -> Option<Self> {
         let len = stencils.len;
@@ -55,6 +106,11 @@ impl<const D: usize> NodeOperator<D> {
         }
         let span = 2 * width - 1;
         let block = span.pow(D as u32);
+        let mm = m * m;
+        let slots = nodes.active.len();
+        if slots * block * mm > MAX_ASSEMBLED_VALUES {
+            return None;
+        }
         // A node's key: its multi-index relative to the stencil's, Σ_a k_a span^a, so that the
         // block entry of a pair (I, J) of one stencil is `key_J − key_I + centre`. Stencils
         // stored as the box in order (axis 0 fastest: B-splines) take the keys of their slots;
@@ -84,9 +140,8 @@ impl<const D: usize> NodeOperator<D> {
                     .sum()
             })
             .collect();
-        let slots = nodes.active.len();
-        // B, dense per row block.
-        let mut dense = vec![0.0; slots * block];
+        // B, dense per row room.
+        let mut dense = vec![0.0; slots * block * mm];
         {
             let rows = SharedSlice::new(&mut dense);
             for colour in &bins.colours {
@@ -94,6 +149,7 @@ impl<const D: usize> NodeOperator<D> {
                     let mut w = vec![0.0; len];
                     let mut row = vec![0usize; len];
                     let mut key = vec![0isize; len];
+                    let mut q = vec![0.0; len * m];
                     for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
                         let p = p as usize;
                         if !counted(p) {
@@ -104,6 +160,9 @@ impl<const D: usize> NodeOperator<D> {
                         for s in 0..len {
                             w[s] = if crate::shape::in_support(vs[s], &gs[s]) {
                                 row[s] = nodes.slot(ns[s]);
+                                if m > 1 {
+                                    basis(p, ns[s], &mut q[s * m..(s + 1) * m]);
+                                }
                                 vs[s].abs()
                             } else {
                                 0.0
@@ -134,11 +193,25 @@ impl<const D: usize> NodeOperator<D> {
                             let ci = c * w[i];
                             // SAFETY: the row belongs to a node that only this block writes in
                             // this colour (`Bins`); rows of different slots are disjoint ranges.
-                            let r = unsafe { rows.range(row[i] * block, block) };
+                            let r = unsafe { rows.range(row[i] * block * mm, block * mm) };
                             let base = centre as isize - key[i];
                             for j in 0..len {
-                                if w[j] != 0.0 {
-                                    r[(base + key[j]) as usize] += ci * w[j];
+                                if w[j] == 0.0 {
+                                    continue;
+                                }
+                                let e = (base + key[j]) as usize;
+                                if m == 1 {
+                                    r[e] += ci * w[j];
+                                    continue;
+                                }
+                                let cij = ci * w[j];
+                                let (qi, qj) = (&q[i * m..(i + 1) * m], &q[j * m..(j + 1) * m]);
+                                let r = &mut r[e * mm..(e + 1) * mm];
+                                for a in 0..m {
+                                    let ca = cij * qi[a];
+                                    for b in 0..m {
+                                        r[a * m + b] += ca * qj[b];
+                                    }
                                 }
                             }
                         }
@@ -146,29 +219,38 @@ impl<const D: usize> NodeOperator<D> {
                 });
             }
         }
-        // K = diag(A) − B, packed.
+        // K = diag(A) − B, packed; a reduced node's rows and columns of degree ≥ 1 zero.
         let mut count = vec![0u32; slots];
         let mut column = vec![0u32; slots * block];
-        let mut value = vec![0.0; slots * block];
+        let mut value = vec![0.0; slots * block * mm];
         count
             .par_iter_mut()
             .zip(column.par_chunks_mut(block))
-            .zip(value.par_chunks_mut(block))
-            .zip(dense.par_chunks(block))
+            .zip(value.par_chunks_mut(block * mm))
+            .zip(dense.par_chunks(block * mm))
             .enumerate()
             .for_each(|(slot, (((count, column), value), b))| {
                 let node = nodes.active[slot] as isize;
                 let mut k = 0;
                 for e in 0..block {
-                    let entry = if e == centre {
-                        moment[slot] - b[e]
-                    } else if b[e] != 0.0 {
-                        -b[e]
-                    } else {
+                    let b = &b[e * mm..(e + 1) * mm];
+                    if e != centre && b.iter().all(|&x| x == 0.0) {
                         continue;
-                    };
-                    column[k] = nodes.slot((node + step[e]) as usize) as u32;
-                    value[k] = entry;
+                    }
+                    let col = nodes.slot((node + step[e]) as usize);
+                    let v = &mut value[k * mm..(k + 1) * mm];
+                    for (i, v) in v.iter_mut().enumerate() {
+                        *v = if e == centre {
+                            moment[slot * mm + i] - b[i]
+                        } else {
+                            -b[i]
+                        };
+                        let (a, c) = (i / m, i % m);
+                        if (a > 0 && reduced[slot]) || (c > 0 && reduced[col]) {
+                            *v = 0.0;
+                        }
+                    }
+                    column[k] = col as u32;
                     k += 1;
                 }
                 *count = k as u32;
@@ -178,47 +260,118 @@ impl<const D: usize> NodeOperator<D> {
             .par_iter()
             .map(|&n| grid.node_multi_index(n))
             .collect();
-        let diagonal = (0..slots)
+        // The diagonal block: the row's entry at its own slot.
+        let diagonal: Vec<f64> = (0..slots)
             .into_par_iter()
-            .map(|slot| moment[slot] - dense[slot * block + centre])
+            .flat_map_iter(|slot| {
+                let start = slot * block;
+                let e = (0..count[slot] as usize)
+                    .find(|&e| column[start + e] as usize == slot)
+                    .expect("a row holds its diagonal block");
+                value[(start + e) * mm..(start + e + 1) * mm].to_vec()
+            })
             .collect();
-        Some(NodeOperator {
+        // The moment blocks, a reduced node's degree ≥ 1 part left out as in K.
+        let moment = if m > 1 {
+            moment
+                .par_chunks_exact(mm)
+                .zip(reduced.par_iter())
+                .flat_map_iter(|(a, &reduced)| {
+                    (0..mm).map(move |i| if reduced && i != 0 { 0.0 } else { a[i] })
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Some(NodeOperator::new(
             index,
+            (m, diagonal, moment),
+            width - 1,
+            block,
+            (count, column, value),
+        ))
+    }
+
+    fn new(
+        index: Vec<[i64; D]>,
+        (m, diagonal, moment): (usize, Vec<f64>, Vec<f64>),
+        radius: usize,
+        block: usize,
+        (count, column, value): (Vec<u32>, Vec<u32>, Vec<f64>),
+    ) -> Self {
+        let inverse = if m > 1 {
+            moment
+                .par_chunks_exact(m * m)
+                .flat_map_iter(|d| block_inverse(d, m))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        NodeOperator {
+            index,
+            m,
             diagonal,
-            radius: width - 1,
+            moment,
+            inverse,
+            radius,
             block,
             count,
             column,
             value,
-        })
+        }
     }
 
-    /// `out = K ζ` for `D` directions stored per slot (`ζ[slot * D + k]`).
+    /// Rows (nodes, or aggregates).
+    fn rows(&self) -> usize {
+        self.index.len()
+    }
+
+    /// `out = K ζ` for `D` directions stored per slot (`ζ[(slot * D + k) * m + j]`).
     pub fn apply(&self, zeta: &[f64], out: &mut [f64]) {
-        out.par_chunks_exact_mut(D)
+        let (m, mm) = (self.m, self.m * self.m);
+        let per = m * D;
+        out.par_chunks_exact_mut(per)
             .enumerate()
             .for_each(|(slot, o)| {
                 let start = slot * self.block;
                 let n = self.count[slot] as usize;
-                let mut sum = [0.0; D];
-                for (&c, &v) in self.column[start..start + n]
-                    .iter()
-                    .zip(&self.value[start..start + n])
-                {
-                    let z = &zeta[c as usize * D..(c as usize + 1) * D];
+                if m == 1 {
+                    let mut sum = [0.0; D];
+                    for (&c, &v) in self.column[start..start + n]
+                        .iter()
+                        .zip(&self.value[start..start + n])
+                    {
+                        let z = &zeta[c as usize * D..(c as usize + 1) * D];
+                        for k in 0..D {
+                            sum[k] += v * z[k];
+                        }
+                    }
+                    o.copy_from_slice(&sum);
+                    return;
+                }
+                o.fill(0.0);
+                for e in 0..n {
+                    let c = self.column[start + e] as usize;
+                    let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
+                    let z = &zeta[c * per..(c + 1) * per];
                     for k in 0..D {
-                        sum[k] += v * z[k];
+                        for a in 0..m {
+                            let v = &v[a * m..(a + 1) * m];
+                            o[k * m + a] += (0..m).map(|b| v[b] * z[k * m + b]).sum::<f64>();
+                        }
                     }
                 }
-                o.copy_from_slice(&sum);
             });
     }
 }
 
-/// Jacobi's damping in the smoother: `D⁻¹K`'s eigenvalues lie in [0, 2] (each row's
+/// Jacobi's damping in the smoother: at order 1 `D⁻¹K`'s eigenvalues lie in [0, 2] (each row's
 /// off-diagonal entries are negative and sum to minus its diagonal), so 2/3 damps the upper half
 /// of the spectrum by at least 3 and keeps the V-cycle positive definite.
 const JACOBI_DAMPING: f64 = 2.0 / 3.0;
+
+/// The damping of the moment-block smoother at order ≥ 2 (`A⁻¹K`'s eigenvalues lie in [0, 1]).
+const MOMENT_DAMPING: f64 = 1.0;
 
 /// Jacobi sweeps before and after the coarse correction.
 const SMOOTHING_SWEEPS: usize = 2;
@@ -231,7 +384,11 @@ const SMOOTHING_SWEEPS: usize = 2;
 /// with 1, 18–20 with 1.5, 12 with 1.8, 11 with 2; 3D 17–21, 12–14, 12, 12.
 const COARSE_WEIGHT: f64 = 1.8;
 
-/// The V-cycle is used when the fine level has at least this many rows per axis
+/// The same at order ≥ 2, with the polynomial prolongation: iterations per step of RK2 + VC2
+/// on the manufactured solution's box at 16 cells, 27 with 1, 19 with 1.4, 20–21 with 1.8.
+const COARSE_WEIGHT_HIGHER: f64 = 1.4;
+
+/// At order 1 the V-cycle is used when the fine level has at least this many rows per axis
 /// (`rows^(1/D)`), see [`Multilevel::pays`].
 const MULTILEVEL_WIDTH: f64 = 48.0;
 
@@ -239,42 +396,89 @@ const MULTILEVEL_WIDTH: f64 = 48.0;
 /// are preconditioned by their diagonal alone, outside the V-cycle.
 const WEAK_ROW: f64 = 1e-3;
 
-/// The coarsest level is solved directly when it has at most this many rows.
+/// At order ≥ 2, the coarsest level's eigenvalues below this fraction of the largest are taken
+/// as its null space. The polynomials' are round-off (1e-16), but the coarsest level also has
+/// near-null directions (6e-9, 5e-8: nodes at a body's corners); inverting them put huge
+/// components into the search directions and conjugate gradients broke down near convergence
+/// in one step of three (RK2 + VC2 at 16 cells, 1e-8), which 1e-4 avoids; the conjugate
+/// gradients take those few directions on themselves.
+const COARSEST_EIGENVALUE: f64 = 1e-4;
+
+/// The coarsest level is solved directly when it has at most this many unknowns per direction
+/// (rows times test polynomials).
 const COARSEST_ROWS: usize = 400;
 
-/// A multilevel preconditioner for the order-1 system: aggregation of 2^D lattice neighbours
-/// per level (piecewise-constant prolongation, Galerkin coarse operators `Pᵀ K P`, which keep
-/// `K`'s zero row sums), damped-Jacobi smoothing, and a dense factor of the coarsest level.
-/// One V-cycle with as many sweeps after as before the coarse correction is a fixed symmetric
-/// positive definite operator, as conjugate gradients need. `K`'s iterations with the node
-/// blocks alone grow with the grid's width (about 450 at 160 nodes across); with the V-cycle
-/// they do not.
+/// A multilevel preconditioner: aggregation of 2^D lattice neighbours per level, Galerkin coarse
+/// operators `Pᵀ K P`, damped block-Jacobi smoothing, and a dense factor of the coarsest level.
+/// The prolongation `P` re-expands an aggregate's polynomial about each of its nodes (at order 1
+/// it is piecewise constant), so that every level holds the polynomials of degree < n over a
+/// whole body, `K`'s null space. One V-cycle with as many sweeps after as before the coarse
+/// correction is a fixed symmetric positive semi-definite operator, as conjugate gradients need.
+/// `K`'s iterations with the node blocks alone grow with the grid's width (about 450 at 160
+/// nodes across at order 1); with the V-cycle they do not.
 pub(crate) struct Multilevel<const D: usize> {
-    /// Per fine row: its diagonal if the row is weak (preconditioned by it alone), else 0.
+    /// Per fine row: its diagonal if the row is weak (preconditioned by its diagonal block
+    /// alone), else 0.
     weak: Vec<f64>,
+    /// Per fine row: whether its node is corrected to order 1 only (its polynomials of
+    /// degree ≥ 1 left out).
+    reduced: Vec<bool>,
     /// The operators, finest first.
     levels: Vec<NodeOperator<D>>,
     /// Per level but the coarsest: each row's aggregate on the next level (`u32::MAX` for a
     /// row without particles, which takes no part).
     parent: Vec<Vec<u32>>,
+    /// Per child position in an aggregate (bit `a` set: the upper node along axis `a`), `P`'s
+    /// `m × m` block: row `e` a node's polynomial, column `f` the aggregate's.
+    prolongation: Vec<Vec<f64>>,
     /// The coarsest level's dense factor (its rows regularised by `1e-10` of their diagonal:
-    /// `K` is singular along the constants of every body).
+    /// `K` is singular along the polynomials of degree < n over every body).
     coarsest: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
     /// Per row of the coarsest level: its connected body (`usize::MAX` for a row without
     /// particles), and the number of bodies.
     body: Vec<usize>,
     bodies: usize,
+    /// At order ≥ 2, the coarsest level's pseudo-inverse, `V diag(1/λ) Vᵀ` over the
+    /// eigenvalues above `COARSEST_EIGENVALUE` of the largest, dense (its null space holds the
+    /// polynomials of degree < n over every body, and of a body with nodes corrected to order 1
+    /// only the constants: the eigenvalues find which).
+    pseudo_inverse: Option<DMatrix<f64>>,
+}
+
+/// The coefficients of the monomial `f` of `Z = (x − x_c)/H` re-expanded about a point `d H`
+/// away in a scale `s H`: `(d + s z)^f = Σ_e P[e][f] z^e`, for the `exponents` (closed under
+/// lowering any exponent, as complete bases are). `m × m` by rows.
+fn re_expansion<const D: usize>(exponents: &[[u32; D]], d: [f64; D], s: f64) -> Vec<f64> {
+    let m = exponents.len();
+    let binomial =
+        |n: u32, k: u32| -> f64 { (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64) };
+    let mut out = vec![0.0; m * m];
+    for (e, ee) in exponents.iter().enumerate() {
+        for (f, ff) in exponents.iter().enumerate() {
+            if (0..D).all(|a| ee[a] <= ff[a]) {
+                out[e * m + f] = (0..D)
+                    .map(|a| {
+                        binomial(ff[a], ee[a])
+                            * d[a].powi((ff[a] - ee[a]) as i32)
+                            * s.powi(ee[a] as i32)
+                    })
+                    .product();
+            }
+        }
+    }
+    out
 }
 
 impl<const D: usize> NodeOperator<D> {
     /// The Galerkin operator of aggregates of 2^D lattice neighbours, and each row's aggregate.
-    fn coarsen(&self) -> (NodeOperator<D>, Vec<u32>) {
-        let rows = self.diagonal.len();
+    fn coarsen(&self, prolongation: &[Vec<f64>]) -> (NodeOperator<D>, Vec<u32>) {
+        let (m, mm) = (self.m, self.m * self.m);
+        let rows = self.rows();
         let mut numbers = std::collections::HashMap::<[i64; D], u32>::new();
         let mut index = Vec::new();
         let parent: Vec<u32> = (0..rows)
             .map(|i| {
-                if self.diagonal[i] <= 0.0 {
+                if self.diagonal[i * mm] <= 0.0 {
                     return u32::MAX;
                 }
                 let key = self.index[i].map(|k| k.div_euclid(2));
@@ -284,12 +488,19 @@ impl<const D: usize> NodeOperator<D> {
                 })
             })
             .collect();
+        let child = |i: usize| -> &[f64] {
+            let c: usize = (0..D)
+                .map(|a| (self.index[i][a].rem_euclid(2) as usize) << a)
+                .sum();
+            &prolongation[c]
+        };
         let coarse = index.len();
         let radius = self.radius.div_ceil(2);
         let span = 2 * radius + 1;
         let block = span.pow(D as u32);
         let centre = (block - 1) / 2;
-        let mut dense = vec![0.0; coarse * block];
+        let mut dense = vec![0.0; coarse * block * mm];
+        let mut vp = vec![0.0; mm];
         for i in 0..rows {
             let a = parent[i];
             if a == u32::MAX {
@@ -298,11 +509,9 @@ impl<const D: usize> NodeOperator<D> {
             let start = i * self.block;
             let n = self.count[i] as usize;
             let ia = index[a as usize];
-            for (&j, &v) in self.column[start..start + n]
-                .iter()
-                .zip(&self.value[start..start + n])
-            {
-                let b = parent[j as usize];
+            for e in 0..n {
+                let j = self.column[start + e] as usize;
+                let b = parent[j];
                 if b == u32::MAX {
                     continue;
                 }
@@ -310,12 +519,30 @@ impl<const D: usize> NodeOperator<D> {
                 let key: usize = (0..D)
                     .map(|k| (ib[k] - ia[k] + radius as i64) as usize * span.pow(k as u32))
                     .sum();
-                dense[a as usize * block + key] += v;
+                let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
+                let out = &mut dense[(a as usize * block + key) * mm..][..mm];
+                if m == 1 {
+                    out[0] += v[0];
+                    continue;
+                }
+                // P_iᵀ V P_j.
+                let (pi, pj) = (child(i), child(j));
+                for r in 0..m {
+                    for g in 0..m {
+                        vp[r * m + g] = (0..m).map(|h| v[r * m + h] * pj[h * m + g]).sum();
+                    }
+                }
+                for f in 0..m {
+                    for g in 0..m {
+                        out[f * m + g] +=
+                            (0..m).map(|r| pi[r * m + f] * vp[r * m + g]).sum::<f64>();
+                    }
+                }
             }
         }
         let mut count = vec![0u32; coarse];
         let mut column = vec![0u32; coarse * block];
-        let mut value = vec![0.0; coarse * block];
+        let mut value = vec![0.0; coarse * block * mm];
         let steps: Vec<[i64; D]> = (0..block)
             .map(|e| {
                 std::array::from_fn(|k| ((e / span.pow(k as u32)) % span) as i64 - radius as i64)
@@ -324,42 +551,81 @@ impl<const D: usize> NodeOperator<D> {
         for a in 0..coarse {
             let mut k = 0;
             for e in 0..block {
-                let v = dense[a * block + e];
-                if v == 0.0 && e != centre {
+                let v = &dense[(a * block + e) * mm..(a * block + e + 1) * mm];
+                if e != centre && v.iter().all(|&x| x == 0.0) {
                     continue;
                 }
                 let at: [i64; D] = std::array::from_fn(|c| index[a][c] + steps[e][c]);
                 column[a * block + k] = numbers[&at];
-                value[a * block + k] = v;
+                value[(a * block + k) * mm..(a * block + k + 1) * mm].copy_from_slice(v);
                 k += 1;
             }
             count[a] = k as u32;
         }
-        let diagonal = (0..coarse).map(|a| dense[a * block + centre]).collect();
+        let diagonal = (0..coarse)
+            .flat_map(|a| dense[(a * block + centre) * mm..(a * block + centre + 1) * mm].to_vec())
+            .collect();
+        // Σ_i P_iᵀ A_i P_i over each aggregate: block diagonal, as every node has one parent.
+        let mut moment = vec![0.0; if m > 1 { coarse * mm } else { 0 }];
+        for i in (0..rows).filter(|&i| m > 1 && parent[i] != u32::MAX) {
+            let (p, a) = (child(i), &self.moment[i * mm..(i + 1) * mm]);
+            let out = &mut moment[parent[i] as usize * mm..][..mm];
+            for f in 0..m {
+                for g in 0..m {
+                    out[f * m + g] += (0..m)
+                        .map(|r| {
+                            p[r * m + f] * (0..m).map(|h| a[r * m + h] * p[h * m + g]).sum::<f64>()
+                        })
+                        .sum::<f64>();
+                }
+            }
+        }
         (
-            NodeOperator {
+            NodeOperator::new(
                 index,
-                diagonal,
+                (m, diagonal, moment),
                 radius,
                 block,
-                count,
-                column,
-                value,
-            },
+                (count, column, value),
+            ),
             parent,
         )
     }
 
-    /// `x += ω D⁻¹ (r − K x)` (rows without particles stay zero).
+    /// `x += ω D⁻¹ (r − K x)` (rows without particles stay zero): at order 1 `D` is `K`'s
+    /// diagonal; at order ≥ 2 the moment blocks, since `K ⪯ A` (`⟨ζ, Kζ⟩` is a weighted variance,
+    /// `⟨ζ, Aζ⟩` the weighted mean square it is taken of) keeps `A⁻¹K`'s eigenvalues in [0, 1]
+    /// on any particles, where `K`'s diagonal blocks give no such bound.
     fn smooth(&self, r: &[f64], x: &mut [f64], kx: &mut [f64]) {
         self.apply(x, kx);
-        x.par_chunks_exact_mut(D)
-            .zip(r.par_chunks_exact(D).zip(kx.par_chunks_exact(D)))
-            .zip(self.diagonal.par_iter())
-            .for_each(|((x, (r, kx)), &d)| {
-                if d > 0.0 {
+        let (m, mm) = (self.m, self.m * self.m);
+        if m == 1 {
+            x.par_chunks_exact_mut(D)
+                .zip(r.par_chunks_exact(D).zip(kx.par_chunks_exact(D)))
+                .zip(self.diagonal.par_iter())
+                .for_each(|((x, (r, kx)), &d)| {
+                    if d > 0.0 {
+                        for k in 0..D {
+                            x[k] += JACOBI_DAMPING * (r[k] - kx[k]) / d;
+                        }
+                    }
+                });
+            return;
+        }
+        let per = m * D;
+        x.par_chunks_exact_mut(per)
+            .zip(r.par_chunks_exact(per).zip(kx.par_chunks_exact(per)))
+            .enumerate()
+            .for_each(|(i, (x, (r, kx)))| {
+                if self.diagonal[i * mm] > 0.0 {
+                    let inv = &self.inverse[i * mm..(i + 1) * mm];
                     for k in 0..D {
-                        x[k] += JACOBI_DAMPING * (r[k] - kx[k]) / d;
+                        for a in 0..m {
+                            let s: f64 = (0..m)
+                                .map(|b| inv[a * m + b] * (r[k * m + b] - kx[k * m + b]))
+                                .sum();
+                            x[k * m + a] += MOMENT_DAMPING * s;
+                        }
                     }
                 }
             });
@@ -367,89 +633,145 @@ impl<const D: usize> NodeOperator<D> {
 }
 
 impl<const D: usize> Multilevel<D> {
-    /// The levels below `fine`, coarsened until the coarsest has at most `COARSEST_ROWS` rows or
-    /// stops shrinking.
+    /// The levels below `fine`, coarsened until the coarsest has at most `COARSEST_ROWS`
+    /// unknowns per direction or stops shrinking; `exponents` are the test polynomials'
+    /// (as [`crate::shape::Monomials`] lists them), `reduced` the nodes corrected to order 1.
     /// Without `cycle`, only the fine operator (preconditioned by the caller).
-    pub fn new(mut fine: NodeOperator<D>, cycle: bool) -> Self {
+    pub fn new(
+        mut fine: NodeOperator<D>,
+        cycle: bool,
+        exponents: &[[u32; D]],
+        reduced: &[bool],
+    ) -> Self {
         if !cycle {
             return Multilevel {
                 weak: Vec::new(),
+                reduced: Vec::new(),
                 levels: vec![fine],
                 parent: Vec::new(),
+                prolongation: Vec::new(),
                 coarsest: None,
                 body: Vec::new(),
                 bodies: 0,
+                pseudo_inverse: None,
             };
         }
-        let largest = fine.diagonal.iter().fold(0.0f64, |a, &d| a.max(d));
-        let threshold = WEAK_ROW;
+        let (m, mm) = (fine.m, fine.m * fine.m);
+        let largest = (0..fine.rows()).fold(0.0f64, |a, i| a.max(fine.diagonal[i * mm]));
+        // At order ≥ 2 no row is left out: the weak rows' blocks, outside the V-cycle, doubled
+        // the iterations (RK2 + VC2 at 16 cells: 44 against 19).
+        let threshold = if m == 1 { WEAK_ROW } else { 0.0 };
         let weak: Vec<f64> = fine
             .diagonal
-            .iter_mut()
+            .chunks_exact_mut(mm)
             .map(|d| {
-                if *d > 0.0 && *d < threshold * largest {
-                    std::mem::replace(d, 0.0)
+                if d[0] > 0.0 && d[0] < threshold * largest {
+                    std::mem::replace(&mut d[0], 0.0)
                 } else {
                     0.0
                 }
             })
             .collect();
+        // The child at offset c ∈ {0, 1}^D of its aggregate sits (c − 1/2)/2 of the aggregate's
+        // spacing from the aggregate's centre, in half its scale.
+        let prolongation = (0..1usize << D)
+            .map(|c| {
+                let d = std::array::from_fn(|a| (((c >> a) & 1) as f64 - 0.5) / 2.0);
+                re_expansion(exponents, d, 0.5)
+            })
+            .collect::<Vec<_>>();
         let mut levels = vec![fine];
         let mut parent = Vec::new();
         loop {
             let last = levels.last().expect("the fine level");
-            let rows = last.diagonal.len();
-            if rows <= COARSEST_ROWS {
+            let rows = last.rows();
+            if rows * m <= COARSEST_ROWS {
                 break;
             }
-            let (coarse, up) = last.coarsen();
-            if coarse.diagonal.len() * 3 > rows * 2 {
+            let (coarse, up) = last.coarsen(&prolongation);
+            if coarse.rows() * 3 > rows * 2 {
                 break;
             }
             levels.push(coarse);
             parent.push(up);
         }
         let last = levels.last().expect("the fine level");
-        let n = last.diagonal.len();
-        let mut dense = nalgebra::DMatrix::<f64>::zeros(n, n);
+        let n = last.rows();
+        let mut dense = DMatrix::<f64>::zeros(n * m, n * m);
         for i in 0..n {
             let start = i * last.block;
             for e in 0..last.count[i] as usize {
-                dense[(i, last.column[start + e] as usize)] += last.value[start + e];
+                let j = last.column[start + e] as usize;
+                let v = &last.value[(start + e) * mm..(start + e + 1) * mm];
+                for a in 0..m {
+                    for b in 0..m {
+                        dense[(i * m + a, j * m + b)] += v[a * m + b];
+                    }
+                }
             }
-            dense[(i, i)] += if last.diagonal[i] > 0.0 {
-                1e-10 * last.diagonal[i]
-            } else {
-                1.0
-            };
+            for a in 0..m {
+                let d = last.diagonal[i * mm + a * m + a];
+                dense[(i * m + a, i * m + a)] += if last.diagonal[i * mm] > 0.0 && d > 0.0 {
+                    1e-10 * d
+                } else {
+                    1.0
+                };
+            }
         }
         // The bodies: rows joined by an entry (rows without particles in none).
         let numbers = super::bodies(n, n, |i, visit: &mut dyn FnMut(usize)| {
             visit(i);
             let start = i * last.block;
             for e in 0..last.count[i] as usize {
-                if last.value[start + e] != 0.0 {
+                if last.value[(start + e) * mm..(start + e + 1) * mm]
+                    .iter()
+                    .any(|&v| v != 0.0)
+                {
                     visit(last.column[start + e] as usize);
                 }
             }
         });
         let bodies = numbers.iter().max().map_or(0, |&b| b + 1);
-        let body = (0..n)
+        let body: Vec<usize> = (0..n)
             .map(|i| {
-                if last.diagonal[i] > 0.0 {
+                if last.diagonal[i * mm] > 0.0 {
                     numbers[i]
                 } else {
                     usize::MAX
                 }
             })
             .collect();
+        let pseudo_inverse = (m > 1).then(|| {
+            // Without the regularisation (the unknowns without particles are zero rows).
+            for i in 0..n * m {
+                let d = last.diagonal[(i / m) * mm + (i % m) * (m + 1)];
+                dense[(i, i)] -= if last.diagonal[(i / m) * mm] > 0.0 && d > 0.0 {
+                    1e-10 * d
+                } else {
+                    1.0
+                };
+            }
+            let eig = dense.clone().symmetric_eigen();
+            let largest = eig.eigenvalues.iter().fold(0.0f64, |a, &l| a.max(l));
+            let inverse = eig.eigenvalues.map(|l| {
+                if l > COARSEST_EIGENVALUE * largest {
+                    1.0 / l
+                } else {
+                    0.0
+                }
+            });
+            &eig.eigenvectors * DMatrix::from_diagonal(&inverse) * eig.eigenvectors.transpose()
+        });
         Multilevel {
             weak,
+            reduced: reduced.to_vec(),
             levels,
             parent,
-            coarsest: dense.cholesky(),
+            prolongation,
+            coarsest: if m == 1 { dense.cholesky() } else { None },
             body,
             bodies,
+            pseudo_inverse,
         }
     }
 
@@ -463,24 +785,45 @@ impl<const D: usize> Multilevel<D> {
         !self.weak.is_empty()
     }
 
-    /// Whether a V-cycle pays for the fine operator `K`: with the node blocks alone the
-    /// iterations grow with the width of the nodes (about 3 per node across: 457 at 161 nodes
-    /// across in 2D, 82 at 26 in 3D, on the throughput example's blocks), while a V-cycle costs
-    /// about six products with `K` and takes about a dozen iterations (`COARSE_WEIGHT`).
+    /// Whether a V-cycle pays for the fine operator `K`. At order 1: with the node blocks
+    /// alone the iterations grow with the width of the nodes (about 3 per node across: 457 at
+    /// 161 nodes across in 2D, 82 at 26 in 3D, on the throughput example's blocks), while a
+    /// V-cycle costs about six products with `K` and takes about a dozen iterations
+    /// (`COARSE_WEIGHT`). At order ≥ 2 the node blocks take about 8 per node across (63 at 13,
+    /// 174 at 21: RK of order 2 on the manufactured solution's box) and the V-cycle about 20,
+    /// so it is used whenever the hierarchy has a level below the nodes (on a single level the
+    /// coarsest pseudo-inverse, whose norm measures nothing of its dropped directions, stopped
+    /// a solve short of the equalities by 1e-11).
     pub fn pays<const E: usize>(fine: &NodeOperator<E>) -> bool {
-        (fine.diagonal.len() as f64).powf(1.0 / E as f64) >= MULTILEVEL_WIDTH
+        if fine.m == 1 {
+            return (fine.rows() as f64).powf(1.0 / E as f64) >= MULTILEVEL_WIDTH;
+        }
+        fine.rows() * fine.m > COARSEST_ROWS
     }
 
     /// `z = M⁻¹ r`: one V-cycle from zero.
     pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
         self.cycle(0, r, z);
-        z.par_chunks_exact_mut(D)
-            .zip(r.par_chunks_exact(D))
+        let fine = &self.levels[0];
+        let m = fine.m;
+        let mm = m * m;
+        z.par_chunks_exact_mut(m * D)
+            .zip(r.par_chunks_exact(m * D))
             .zip(self.weak.par_iter())
-            .for_each(|((z, r), &d)| {
+            .enumerate()
+            .for_each(|(i, ((z, r), &d))| {
                 if d > 0.0 {
+                    if m == 1 {
+                        for k in 0..D {
+                            z[k] = r[k] / d;
+                        }
+                        return;
+                    }
+                    let inv = &fine.inverse[i * mm..(i + 1) * mm];
                     for k in 0..D {
-                        z[k] = r[k] / d;
+                        for a in 0..m {
+                            z[k * m + a] = (0..m).map(|b| inv[a * m + b] * r[k * m + b]).sum();
+                        }
                     }
                 }
             });
@@ -488,34 +831,23 @@ impl<const D: usize> Multilevel<D> {
 
     fn cycle(&self, l: usize, r: &[f64], x: &mut [f64]) {
         let level = &self.levels[l];
+        let m = level.m;
+        let per = m * D;
         x.fill(0.0);
         if l + 1 == self.levels.len() {
-            // The right-hand side's constant part per body, which no solution meets (round-off
-            // of the residual's sum, which `K`'s zero column sums keep at zero), removed before
-            // the solve and the solution's after it: the regularisation would amplify them.
             if let Some(c) = &self.coarsest {
-                let n = level.diagonal.len();
-                let zero_means = |v: &mut nalgebra::DVector<f64>| {
-                    let mut sums = vec![(0.0, 0.0); self.bodies];
-                    for i in 0..n {
-                        if let Some(s) = sums.get_mut(self.body[i]) {
-                            *s = (s.0 + v[i], s.1 + 1.0);
-                        }
-                    }
-                    for i in 0..n {
-                        match sums.get(self.body[i]) {
-                            Some(s) => v[i] -= s.0 / s.1,
-                            None => v[i] = 0.0,
-                        }
-                    }
-                };
+                self.solve_coarsest(c, r, x);
+            }
+            if let Some(inverse) = &self.pseudo_inverse {
+                let n = level.rows() * m;
                 for k in 0..D {
-                    let mut rhs = nalgebra::DVector::from_iterator(n, (0..n).map(|i| r[i * D + k]));
-                    zero_means(&mut rhs);
-                    let mut sol = c.solve(&rhs);
-                    zero_means(&mut sol);
+                    let rhs = nalgebra::DVector::from_iterator(
+                        n,
+                        (0..n).map(|i| r[(i / m) * per + k * m + i % m]),
+                    );
+                    let sol = inverse * rhs;
                     for i in 0..n {
-                        x[i * D + k] = sol[i];
+                        x[(i / m) * per + k * m + i % m] = sol[i];
                     }
                 }
             }
@@ -525,31 +857,99 @@ impl<const D: usize> Multilevel<D> {
         for _ in 0..SMOOTHING_SWEEPS {
             level.smooth(r, x, &mut kx);
         }
-        // The residual, summed onto the aggregates in row order.
+        // The residual, restricted onto the aggregates in row order (at order 1 summed).
         level.apply(x, &mut kx);
         let parent = &self.parent[l];
-        let coarse = self.levels[l + 1].diagonal.len();
-        let mut rc = vec![0.0; coarse * D];
+        let coarse = self.levels[l + 1].rows();
+        let mut rc = vec![0.0; coarse * per];
+        let child = |i: usize| -> &[f64] {
+            let c: usize = (0..D)
+                .map(|a| (level.index[i][a].rem_euclid(2) as usize) << a)
+                .sum();
+            &self.prolongation[c]
+        };
         for (i, &a) in parent.iter().enumerate() {
-            if a != u32::MAX {
+            if a == u32::MAX {
+                continue;
+            }
+            let a = a as usize;
+            if m == 1 {
                 for k in 0..D {
-                    rc[a as usize * D + k] += r[i * D + k] - kx[i * D + k];
+                    rc[a * D + k] += r[i * D + k] - kx[i * D + k];
+                }
+                continue;
+            }
+            let p = child(i);
+            for k in 0..D {
+                for f in 0..m {
+                    rc[a * per + k * m + f] += (0..m)
+                        .map(|e| p[e * m + f] * (r[i * per + k * m + e] - kx[i * per + k * m + e]))
+                        .sum::<f64>();
                 }
             }
         }
-        let mut xc = vec![0.0; coarse * D];
+        let mut xc = vec![0.0; coarse * per];
         self.cycle(l + 1, &rc, &mut xc);
-        x.par_chunks_exact_mut(D)
+        let reduced = if l == 0 { &self.reduced[..] } else { &[] };
+        x.par_chunks_exact_mut(per)
             .zip(parent.par_iter())
-            .for_each(|(x, &a)| {
-                if a != u32::MAX {
+            .enumerate()
+            .for_each(|(i, (x, &a))| {
+                if a == u32::MAX {
+                    return;
+                }
+                let a = a as usize;
+                if m == 1 {
                     for k in 0..D {
-                        x[k] += COARSE_WEIGHT * xc[a as usize * D + k];
+                        x[k] += COARSE_WEIGHT * xc[a * D + k];
+                    }
+                    return;
+                }
+                let p = child(i);
+                // A node corrected to order 1 takes the constant part only.
+                let terms = if reduced.get(i) == Some(&true) { 1 } else { m };
+                for k in 0..D {
+                    for e in 0..terms {
+                        x[k * m + e] += COARSE_WEIGHT_HIGHER
+                            * (0..m)
+                                .map(|f| p[e * m + f] * xc[a * per + k * m + f])
+                                .sum::<f64>();
                     }
                 }
             });
         for _ in 0..SMOOTHING_SWEEPS {
             level.smooth(r, x, &mut kx);
+        }
+    }
+
+    /// The coarsest level's direct solve at order 1. The right-hand side's constant part per
+    /// body (round-off of the residual's sum, which `K`'s zero column sums keep at zero),
+    /// removed before the solve and the solution's after it: the regularisation would amplify
+    /// them.
+    fn solve_coarsest(&self, c: &nalgebra::Cholesky<f64, nalgebra::Dyn>, r: &[f64], x: &mut [f64]) {
+        let n = self.levels.last().expect("a level").rows();
+        let zero_means = |v: &mut nalgebra::DVector<f64>| {
+            let mut sums = vec![(0.0, 0.0); self.bodies];
+            for i in 0..n {
+                if let Some(s) = sums.get_mut(self.body[i]) {
+                    *s = (s.0 + v[i], s.1 + 1.0);
+                }
+            }
+            for i in 0..n {
+                match sums.get(self.body[i]) {
+                    Some(s) => v[i] -= s.0 / s.1,
+                    None => v[i] = 0.0,
+                }
+            }
+        };
+        for k in 0..D {
+            let mut rhs = nalgebra::DVector::from_iterator(n, (0..n).map(|i| r[i * D + k]));
+            zero_means(&mut rhs);
+            let mut sol = c.solve(&rhs);
+            zero_means(&mut sol);
+            for i in 0..n {
+                x[i * D + k] = sol[i];
+            }
         }
     }
 }

@@ -293,6 +293,63 @@ fn assembled_first_order_system_matches_the_matrix_free_one() {
     }
 }
 
+/// At order 2 the system assembled on the nodes and preconditioned by the V-cycle (polynomial
+/// prolongation, moment-block smoothing) gives the corrections of the matrix-free solve with
+/// the node blocks, in fewer iterations; the boxes are wide enough for the hierarchy to have a
+/// level below the nodes (`Multilevel::pays`). Both stop at 1e-12 of the right-hand side's
+/// norm in the node blocks; 1e-8 of the largest correction leaves room for the edge nodes'
+/// coefficients (up to `6.7·10^3 / h`, see `VC_MAX_CORRECTION`).
+#[test]
+fn second_order_multilevel_matches_the_node_blocks() {
+    fn compare<const D: usize>(cells: usize, shape: Shape) {
+        let run = |solve: Solve| {
+            let mut sim = jittered_box_on::<D>(cells, shape, Some(2), 0.3);
+            let (grid, ps, volumes) = prepare_stencils(&mut sim);
+            let vc = correction(&mut sim, &grid, &ps, &volumes, 2, solve);
+            let work = &sim.work;
+            let mut out = Vec::new();
+            for p in 0..ps.len() {
+                let (ns, ws, _) = work.stencils.of(p);
+                for s in 0..ns.len() {
+                    out.push(vc.gradient_correction(
+                        &grid,
+                        &work.nodes,
+                        ns[s],
+                        p,
+                        &ps.position[p],
+                        ws[s],
+                    ));
+                }
+            }
+            (out, vc.iterations)
+        };
+        let (blocks, blocks_iterations) = run(Solve::MatrixFree);
+        let (cycle, cycle_iterations) = run(Solve::Auto);
+        let largest = blocks.iter().fold(0.0f64, |m, g| m.max(g.norm()));
+        let diff = cycle
+            .iter()
+            .zip(&blocks)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).norm()));
+        assert!(
+            largest > 1e-2 && diff <= 1e-8 * largest,
+            "{shape:?} {D}D: V-cycle differs from the node blocks by {diff:e} of {largest:e}"
+        );
+        assert!(
+            2 * cycle_iterations < blocks_iterations,
+            "{shape:?} {D}D: {cycle_iterations} iterations with the V-cycle, \
+             {blocks_iterations} with the node blocks"
+        );
+    }
+    let rk2 = Shape::Rk {
+        order: 2,
+        support: 3.0,
+    };
+    for shape in [Shape::BSpline2, rk2] {
+        compare::<2>(25, shape);
+        compare::<3>(10, shape);
+    }
+}
+
 /// The order-1 solve's iterations do not grow with the grid (the multilevel preconditioner of
 /// `node_operator`), where with the node blocks alone (the matrix-free path) they grow about
 /// with its width. 2D, quadratic B-spline, particles jittered by ±30 %.
