@@ -25,9 +25,10 @@
 //! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
 //! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
 //! node blocks `A_I`, whose first iterate is the per-node correction; the iterations grow with
-//! the grid's width. At order 1 `K` is assembled on the nodes once per step, and on grids at
-//! least 48 nodes wide preconditioned by an aggregation multigrid V-cycle instead
-//! (`node_operator`): about a dozen iterations whatever the grid. `K`'s null space is the
+//! the grid's width. `K` is assembled on the nodes once per step, and on wide grids (order 1:
+//! at least 48 nodes wide; order ≥ 2: whenever the hierarchy has a level below the nodes)
+//! preconditioned by an aggregation multigrid V-cycle instead (`node_operator`): about a
+//! dozen iterations whatever the grid at order 1, about 20–36 at order 2. `K`'s null space is the
 //! corrections that change no gradient (a polynomial of degree < n over a whole body); the
 //! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
 //! body at order 1, zero for a closed surface. It is projected out per connected body before
