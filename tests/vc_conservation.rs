@@ -194,8 +194,7 @@ fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: T
     worst / (n as f64 * s)
 }
 
-/// Issue target: a mirror-symmetric problem stays symmetric with VC (to round-off; met without
-/// VC, to the solve's tolerance with it, see the bounds below).
+/// Issue target: a mirror-symmetric problem stays symmetric with VC, to round-off.
 #[test]
 fn vc_keeps_a_dropped_block_mirror_symmetric() {
     let rk1 = Shape::Rk {
@@ -207,28 +206,32 @@ fn vc_keeps_a_dropped_block_mirror_symmetric() {
         support: 3.0,
     };
     let (apic, pic) = (Transfer::Apic, Transfer::PicFlip { flip: 0.0 });
-    for (name, shape, order, transfer) in [
-        ("B-spline 2", Shape::BSpline2, None, apic),
-        ("B-spline 2 + VC1", Shape::BSpline2, Some(1), apic),
-        ("B-spline 3 + VC1", Shape::BSpline3, Some(1), apic),
-        ("RK1 + VC1", rk1, Some(1), apic),
-        ("RK2", rk2, None, pic),
-        ("RK2 + VC2", rk2, Some(2), pic),
-    ] {
+    // Without VC the mismatch is the round-off of the fall and the impact: 7.1e-15 measured in
+    // 2D. VC of order 1 adds nothing measurable (6.5e-15 to 9.5e-15). At order 2 the solve
+    // stops at 1e-12 of the right-hand side (or within `VC_SOLVE_ATTAINABLE` of it), and the
+    // round-off of its sums is not mirror symmetric: 6.3e-14 measured. The bounds are 10 times
+    // these; the mismatch was 5e-2 when RK2's edge lumping weighted the correction with the
+    // transfer weights instead of Ψ.
+    let cases2 = [
+        ("B-spline 2", Shape::BSpline2, None, apic, 1e-13),
+        ("B-spline 2 + VC1", Shape::BSpline2, Some(1), apic, 1e-13),
+        ("B-spline 3 + VC1", Shape::BSpline3, Some(1), apic, 1e-13),
+        ("RK1 + VC1", rk1, Some(1), apic, 1e-13),
+        ("RK2", rk2, None, pic, 1e-13),
+        ("RK2 + VC2", rk2, Some(2), pic, 1e-12),
+    ];
+    for (name, shape, order, transfer, bound) in cases2 {
         let mismatch = mirror_mismatch::<2>(shape, order, transfer);
         eprintln!("2D {name}: mirror mismatch {mismatch:.2e}");
-        // Without VC the mismatch is round-off (7e-15 measured). VC's conjugate-gradient solve
-        // stops at a relative residual of 1e-12, and the round-off of its sums is not mirror
-        // symmetric, so what it leaves is not either: measured 1.3e-11 (order 1) and 1.6e-9
-        // (order 2, a worse-conditioned system), against 5e-2 when RK2's edge lumping weighted
-        // the correction with the transfer weights instead of Ψ.
-        let bound = if order == Some(2) { 1e-8 } else { 1e-9 };
         assert!(mismatch < bound, "2D {name}: mirror mismatch {mismatch:e}");
     }
-    let mismatch = mirror_mismatch::<3>(rk1, Some(1), Transfer::Apic);
+    // 3D RK2 + VC2 is left out: its system (`7^3`-node stencils, blocks of `4 × 4`) is above
+    // the assembly's size limit on this grid, and the matrix-free solve took more than 20
+    // minutes for the 0.4 s of the drop.
+    let mismatch = mirror_mismatch::<3>(rk1, Some(1), apic);
     eprintln!("3D RK1 + VC1: mirror mismatch {mismatch:.2e}");
     assert!(
-        mismatch < 1e-9,
+        mismatch < 1e-13,
         "3D RK1 + VC1: mirror mismatch {mismatch:e}"
     );
 }

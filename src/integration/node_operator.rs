@@ -349,19 +349,55 @@ impl<const D: usize> NodeOperator<D> {
                     o.copy_from_slice(&sum);
                     return;
                 }
-                o.fill(0.0);
-                for e in 0..n {
-                    let c = self.column[start + e] as usize;
-                    let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
-                    let z = &zeta[c * per..(c + 1) * per];
-                    for k in 0..D {
-                        for a in 0..m {
-                            let v = &v[a * m..(a + 1) * m];
-                            o[k * m + a] += (0..m).map(|b| v[b] * z[k * m + b]).sum::<f64>();
+                let (column, value) = (
+                    &self.column[start..start + n],
+                    &self.value[start * mm..(start + n) * mm],
+                );
+                // The block sizes of order 2 (2D, 3D) and 3 (2D) with the size known to the
+                // compiler, which unrolls the blocks' products; the same sums in the same order.
+                match m {
+                    3 => block_row::<D, 3>(column, value, zeta, o),
+                    4 => block_row::<D, 4>(column, value, zeta, o),
+                    6 => block_row::<D, 6>(column, value, zeta, o),
+                    _ => {
+                        o.fill(0.0);
+                        for (e, &c) in column.iter().enumerate() {
+                            let v = &value[e * mm..(e + 1) * mm];
+                            let z = &zeta[c as usize * per..(c as usize + 1) * per];
+                            for k in 0..D {
+                                for a in 0..m {
+                                    let v = &v[a * m..(a + 1) * m];
+                                    o[k * m + a] +=
+                                        (0..m).map(|b| v[b] * z[k * m + b]).sum::<f64>();
+                                }
+                            }
                         }
                     }
                 }
             });
+    }
+}
+
+/// One row of [`NodeOperator::apply`] with `M × M` blocks: `o = Σ_e V_e ζ_{column_e}` per
+/// direction.
+#[inline(always)]
+fn block_row<const D: usize, const M: usize>(
+    column: &[u32],
+    value: &[f64],
+    zeta: &[f64],
+    o: &mut [f64],
+) {
+    let mut sum = [[0.0; M]; D];
+    for (&c, v) in column.iter().zip(value.chunks_exact(M * M)) {
+        let z = &zeta[c as usize * M * D..(c as usize + 1) * M * D];
+        for k in 0..D {
+            for a in 0..M {
+                sum[k][a] += (0..M).map(|b| v[a * M + b] * z[k * M + b]).sum::<f64>();
+            }
+        }
+    }
+    for k in 0..D {
+        o[k * M..(k + 1) * M].copy_from_slice(&sum[k]);
     }
 }
 
@@ -596,8 +632,13 @@ impl<const D: usize> NodeOperator<D> {
     /// diagonal; at order ≥ 2 the moment blocks, since `K ⪯ A` (`⟨ζ, Kζ⟩` is a weighted variance,
     /// `⟨ζ, Aζ⟩` the weighted mean square it is taken of) keeps `A⁻¹K`'s eigenvalues in [0, 1]
     /// on any particles, where `K`'s diagonal blocks give no such bound.
-    fn smooth(&self, r: &[f64], x: &mut [f64], kx: &mut [f64]) {
-        self.apply(x, kx);
+    /// With `from_zero` (`x` is zero) `K x` is not computed.
+    fn smooth(&self, r: &[f64], x: &mut [f64], kx: &mut [f64], from_zero: bool) {
+        if from_zero {
+            kx.fill(0.0);
+        } else {
+            self.apply(x, kx);
+        }
         let (m, mm) = (self.m, self.m * self.m);
         if m == 1 {
             x.par_chunks_exact_mut(D)
@@ -854,8 +895,8 @@ impl<const D: usize> Multilevel<D> {
             return;
         }
         let mut kx = vec![0.0; r.len()];
-        for _ in 0..SMOOTHING_SWEEPS {
-            level.smooth(r, x, &mut kx);
+        for sweep in 0..SMOOTHING_SWEEPS {
+            level.smooth(r, x, &mut kx, sweep == 0);
         }
         // The residual, restricted onto the aggregates in row order (at order 1 summed).
         level.apply(x, &mut kx);
@@ -918,7 +959,7 @@ impl<const D: usize> Multilevel<D> {
                 }
             });
         for _ in 0..SMOOTHING_SWEEPS {
-            level.smooth(r, x, &mut kx);
+            level.smooth(r, x, &mut kx, false);
         }
     }
 

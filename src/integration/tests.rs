@@ -108,6 +108,24 @@ fn correction<const D: usize>(
     vc
 }
 
+/// Every particle–node gradient correction of `vc`, particle by particle in stencil order.
+fn corrections_of<const D: usize>(
+    vc: &VcCorrection<D>,
+    sim: &Sim<D>,
+    grid: &Grid<D>,
+    ps: &crate::particles::Particles<D>,
+) -> Vec<Vector<D>> {
+    let work = &sim.work;
+    let mut out = Vec::new();
+    for p in 0..ps.len() {
+        let (ns, ws, _) = work.stencils.of(p);
+        for s in 0..ns.len() {
+            out.push(vc.gradient_correction(grid, &work.nodes, ns[s], p, &ps.position[p], ws[s]));
+        }
+    }
+    out
+}
+
 /// The residuals `Σ_p ∇̂Ψ_I Q V_p + Σ_p Ψ_I ∇Q V_p − Σ_b Ψ_I Q n a` of every node and
 /// monomial `Q` of degree < `order`, largest absolute value.
 fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, order: u32) -> f64 {
@@ -230,23 +248,8 @@ fn assembled_first_order_system_matches_the_matrix_free_one() {
         let mut sim = jittered_box::<D>(shape, Some(1), 0.4);
         let (grid, ps, volumes) = prepare_stencils(&mut sim);
         let vc = correction(&mut sim, &grid, &ps, &volumes, 1, solve);
-        let work = &sim.work;
         assert!(vc.iterations > 0, "{D}D: a solve that iterates");
-        let mut out = Vec::new();
-        for p in 0..ps.len() {
-            let (ns, ws, _) = work.stencils.of(p);
-            for s in 0..ns.len() {
-                out.push(vc.gradient_correction(
-                    &grid,
-                    &work.nodes,
-                    ns[s],
-                    p,
-                    &ps.position[p],
-                    ws[s],
-                ));
-            }
-        }
-        out
+        corrections_of(&vc, &sim, &grid, &ps)
     }
     fn compare<const D: usize>(shape: Shape, tolerance: f64) {
         let b = corrections::<D>(shape, Solve::MatrixFree);
@@ -306,22 +309,7 @@ fn second_order_multilevel_matches_the_node_blocks() {
             let mut sim = jittered_box_on::<D>(cells, shape, Some(2), 0.3);
             let (grid, ps, volumes) = prepare_stencils(&mut sim);
             let vc = correction(&mut sim, &grid, &ps, &volumes, 2, solve);
-            let work = &sim.work;
-            let mut out = Vec::new();
-            for p in 0..ps.len() {
-                let (ns, ws, _) = work.stencils.of(p);
-                for s in 0..ns.len() {
-                    out.push(vc.gradient_correction(
-                        &grid,
-                        &work.nodes,
-                        ns[s],
-                        p,
-                        &ps.position[p],
-                        ws[s],
-                    ));
-                }
-            }
-            (out, vc.iterations)
+            (corrections_of(&vc, &sim, &grid, &ps), vc.iterations)
         };
         let (blocks, blocks_iterations) = run(Solve::MatrixFree);
         let (cycle, cycle_iterations) = run(Solve::Auto);
