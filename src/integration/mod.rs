@@ -80,10 +80,10 @@ pub(crate) const VC_SOLVE_MAX_RESTARTS: usize = 5;
 /// At order ≥ 2 the residual that round-off lets the solve reach lies at the tolerance itself:
 /// RK2 + VC2 on the manufactured solution's box (quarter points, 16 and 32 cells) reaches
 /// 1.0–1.8e-12 of the right-hand side in about 20 and 40 iterations, then wanders there (up to
-/// 1e-5) until it breaks down or happens below 1e-12: 25 iterations per step on average at 16
-/// cells, 93 at 32, 1985 in the first step, for corrections equal to 1e-11. So a best residual
-/// within this factor of the tolerance is accepted when the iterations stop improving it
-/// (`VC_SOLVE_STAGNATION` in a row, or a breakdown).
+/// 1e-5) until it breaks down or happens below 1e-12: 25 and 93 iterations per step on average
+/// (619 and 1985 in the first step) where 19 and 46 give the same errors to four digits. So a
+/// best residual within this factor of the tolerance is accepted when the iterations stop
+/// improving it (`VC_SOLVE_STAGNATION` in a row, or a breakdown).
 pub(crate) const VC_SOLVE_ATTAINABLE: f64 = 10.0;
 
 /// See [`VC_SOLVE_ATTAINABLE`].
