@@ -535,8 +535,8 @@ fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error
         if quick { " --quick" } else { "" },
         rayon::current_num_threads()
     )?;
-    // 3D RK1 + VC1 takes 45 s at 16 cells and 600 s at 24 on one thread (the node blocks: the
-    // 3D grids are below the V-cycle's width), so the 3D part stops at 16 cells.
+    // 3D RK1 + VC1 takes 45 s at 16 cells and 600 s at 24 on one loaded thread (the node
+    // blocks: the 3D grids are below the V-cycle's width), so the 3D part stops at 16 cells.
     let (grids2, grids3): (&[usize], &[usize]) = if quick {
         (&[8, 16, 32], &[4, 6, 8])
     } else {
