@@ -7,7 +7,8 @@
 //! (deformable or rigid), and gravity: linear hats, B-splines, RK of order 1 and of order 2
 //! (signed, with the transfer weights of `edge_lumping` at a body's edge), every transfer
 //! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material,
-//! material-point integration and VC of order 1 over the surface found from the particles. The
+//! material-point integration and VC of order 1 over the surface found from the particles or over
+//! given boundary points (which carry tractions and move with the grid, without contact). The
 //! wall conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`), the stresses
 //! the materials' own, the edge-lumping node weights `EdgeLumping::blend`'s, the contact law
 //! `contact::correct_velocities`'s and the found surface `BoundaryPoints::of_particles`'s: the
@@ -122,7 +123,10 @@ fn vc_corrections<const D: usize>(
     body: Option<u32>,
 ) -> crate::Result<Vec<Vec<Vector<D>>>> {
     let ps = &sim.particles;
-    let surface = super::surface::found_surface(&sim.grid, ps, body)?;
+    let surface = match sim.boundary.is_empty() {
+        true => super::surface::found_surface(&sim.grid, ps, body)?,
+        false => sim.boundary.clone(),
+    };
     // The particles of `body` (all without contact), and their stencils.
     let members: Vec<usize> = (0..ps.len())
         .filter(|&p| body.is_none_or(|b| ps.material[p] == b))
@@ -433,8 +437,12 @@ fn gather<const D: usize>(
 /// particles unchanged) when a new state is not finite, inverted or outside the grid.
 pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate::Result<()> {
     assert!(
-        sim.vc.as_ref().is_none_or(|vc| vc.order == 1) && sim.boundary.is_empty(),
-        "the reference step covers VC of order 1 over the found surface"
+        sim.vc.as_ref().is_none_or(|vc| vc.order == 1),
+        "the reference step covers VC of order 1"
+    );
+    assert!(
+        sim.boundary.is_empty() || sim.options.contact.is_none(),
+        "given boundary points are for one body"
     );
     assert!(
         sim.particles.in_id_order(),
@@ -487,6 +495,15 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
             body,
         };
         map_to_grid(sim, &stencils, &map, &mut nodes);
+        // The given boundary points' tractions: `t_b |n_b a_b|` on the nodes by `Ψ_I(x_b)`.
+        for b in (0..sim.boundary.len()).filter(|_| sim.boundary.has_tractions()) {
+            let force = sim.boundary.traction[b] * sim.boundary.area_normal[b].norm();
+            let sb = stencil(sim, &sim.boundary.position[b]);
+            for (&n, &w) in sb.nodes.iter().zip(&sb.values).filter(|(_, &w)| w != 0.0) {
+                nodes.touch(n);
+                nodes.force[n] += w * force;
+            }
+        }
         update_grid(sim, &mut nodes, Some(dt), mass_floor);
         if let Some(v) = rigid_velocity {
             for k in 0..nodes.active.len() {
@@ -574,8 +591,40 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         }
     }
 
-    // Constitutive update and checks.
+    // Given boundary points (with VC or tractions) move with the grid like massless particles:
+    // `F_b` with the velocity gradient there, `n a` by Nanson's formula `J F⁻ᵀ N A`; they must
+    // stay finite, uninverted and inside the grid (clamped onto walls first).
     let domain = grid.domain();
+    let mut boundary = sim.boundary.clone();
+    if sim.vc.is_some() || boundary.has_tractions() {
+        for b in 0..boundary.len() {
+            let sb = stencil(sim, &boundary.position[b]);
+            let (v_b, _, _, l_b) = gather(grid, &sb, &boundary.position[b], &fields[0]);
+            let f = (Matrix::<D>::identity() + dt * l_b) * boundary.deformation_gradient[b];
+            let j = crate::determinant(&f);
+            let area_normal = match f.try_inverse() {
+                Some(fi) => j * fi.transpose() * boundary.reference_area_normal[b],
+                None => Vector::from_element(f64::NAN),
+            };
+            let mut position = boundary.position[b] + dt * v_b;
+            sim.options.walls.clamp_to_walls(&domain, &mut position);
+            let finite = position
+                .iter()
+                .chain(area_normal.iter())
+                .all(|c| c.is_finite());
+            if !finite || j <= 0.0 || !domain.contains(&position) {
+                return Err(crate::Error::new(
+                    crate::ErrorKind::InvertedParticle,
+                    format!("boundary point {b} is not admissible"),
+                ));
+            }
+            boundary.position[b] = position;
+            boundary.deformation_gradient[b] = f;
+            boundary.area_normal[b] = area_normal;
+        }
+    }
+
+    // Constitutive update and checks.
     let mut new = ps.clone();
     for p in 0..n {
         let f = (Matrix::<D>::identity() + dt * l[p]) * ps.deformation_gradient[p];
@@ -615,6 +664,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         }
     }
     sim.particles = new;
+    sim.boundary = boundary;
     sim.time += dt;
     sim.steps += 1;
     Ok(())
@@ -642,6 +692,9 @@ mod tests {
         vc: bool,
         /// 0: one body; 1: two deformable bodies in contact; 2: a deformable and a rigid one.
         contact: usize,
+        /// Without contact, 0: no boundary points (VC finds the surface); 1: the block's faces
+        /// given as boundary points; 2: those with tractions.
+        boundary: usize,
     }
 
     fn cases() -> impl Strategy<Value = Case> {
@@ -655,6 +708,7 @@ mod tests {
             0..3usize,
             any::<bool>(),
             (any::<bool>(), 0..3usize),
+            0..3usize,
         )
             .prop_map(
                 |(
@@ -667,6 +721,7 @@ mod tests {
                     material,
                     body_force,
                     (vc, contact),
+                    boundary,
                 )| Case {
                     seed,
                     shape,
@@ -678,6 +733,7 @@ mod tests {
                     body_force,
                     vc,
                     contact,
+                    boundary,
                 },
             )
     }
@@ -764,7 +820,7 @@ mod tests {
         let q = h / 2.0;
         let per_axis = cells;
         let mut rng = UniformRng::new(case.seed);
-        let (mut x, mut v, mut body) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut x, mut v, mut body, mut sites) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for k in 0..per_axis.pow(D as u32) {
             body.push(if k % per_axis < per_axis / 2 {
                 id
@@ -776,7 +832,11 @@ mod tests {
             for a in 0..D {
                 let i = rest % per_axis;
                 rest /= per_axis;
-                xp[a] = (i as f64 + 0.5) * q + 0.4 * q * (rng.uniform() - 0.5);
+                xp[a] = (i as f64 + 0.5) * q;
+            }
+            sites.push(xp);
+            for a in 0..D {
+                xp[a] += 0.4 * q * (rng.uniform() - 0.5);
             }
             x.push(xp);
             v.push(Vector::<D>::from_fn(|_, _| rng.uniform() - 0.5));
@@ -794,6 +854,20 @@ mod tests {
             if second == id {
                 break;
             }
+        }
+        if case.boundary > 0 && case.contact == 0 {
+            // The faces of the lattice the particles were jittered from, and on them a
+            // traction that varies from point to point.
+            let volumes = vec![q.powi(D as i32); sites.len()];
+            let (mut bx, bn) = crate::BoundaryPoints::from_lattice(&sites, &volumes);
+            // The faces on the low walls lie at 0 up to the round-off of `V^{1/3}`.
+            bx.iter_mut().for_each(|x| x.apply(|c| *c = c.max(0.0)));
+            let traction: Vec<Vector<D>> = bx
+                .iter()
+                .map(|x| Vector::<D>::from_fn(|i, _| 2e3 * (5.0 * x[(i + 1) % D]).cos()))
+                .collect();
+            let tractions = (case.boundary == 2).then_some(&traction[..]);
+            sim.add_boundary_points(&bx, &bn, tractions).unwrap();
         }
         sim
     }
