@@ -9,14 +9,15 @@
 //! cargo run --release --example convergence -- --placed # only the particles off the Gauss points
 //! ```
 //!
-//! The particles off the Gauss points (quarter points; jittered by ±30 %, three seeds; 2D to 128
-//! cells, 3D to 16) go to `docs/convergence/placed.md`, `placed_l2.png` and `placed3d_l2.png`:
+//! The particles off the Gauss points (quarter points; jittered by ±30 %, three seeds; slip walls,
+//! and fixed walls on the low faces with slip walls on the high ones; 2D to 128 cells, 3D to 16)
+//! go to `docs/convergence/placed.md`, `placed_l2.png` and `placed3d_l2.png`:
 //! the cases where VC has something to correct.
 
 use plotters::prelude::*;
 use rkmpm::{Integration, Shape, Transfer};
 use rkmpm_studies::verification::{
-    fitted_slope, run_mms, run_mms_placed, AxisAlignedMms, ColumnRun, MmsRun, Placement,
+    fitted_slope, run_mms, run_mms_placed, AxisAlignedMms, ColumnRun, MmsRun, MmsWalls, Placement,
     SelfWeightColumn, Surface,
 };
 use std::fmt::Write as _;
@@ -520,7 +521,8 @@ fn draw_loglog(
 /// The manufactured solution with the particles off the Gauss points, at the quarter points
 /// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the cubic B-spline with
 /// material-point integration and RK1 + VC1 with the surface found from the particles (what a
-/// user who gives no boundary points gets): 2D to 128 cells, 3D to 16. Writes `placed.md`
+/// user who gives no boundary points gets), between slip walls and between fixed (low) and slip
+/// (high) walls: 2D to 128 cells, 3D to 16. Writes `placed.md`
 /// (tables, band over the seeds, slopes), `placed_l2.png` and `placed3d_l2.png`.
 fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error>> {
     let mut md = String::from("# Convergence off the Gauss points (manufactured solution)\n\n");
@@ -530,8 +532,10 @@ fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error
          hand. The study's problem (see `README.md` here: slip walls on every face), 2 particles \
          per cell per direction at the quarter points of each cell, or moved from there by a \
          uniform random amount of up to ±30 % of their spacing per direction (seeds 1, 2, 3: the \
-         band is the smallest and largest error over them). APIC; RK1 + VC1 with the surface \
-         found from the particles. Run times on {} thread(s).\n",
+         band is the smallest and largest error over them). \"Fixed + slip walls\": fixed walls \
+         on the low faces and slip walls on the high ones, the solution's components multiplied \
+         by `sin(π X_b / 2)` along the other axes (`MmsWalls::FixedLowSlipHigh`). APIC; RK1 + \
+         VC1 with the surface found from the particles. Run times on {} thread(s).\n",
         if quick { " --quick" } else { "" },
         rayon::current_num_threads()
     )?;
@@ -574,11 +578,25 @@ fn placed_dimension<const D: usize>(
         fraction: 0.3,
         seed,
     };
+    let (slip, mixed) = (MmsWalls::Slip, MmsWalls::FixedLowSlipHigh);
     let placements = [
-        ("quarter points", vec![Placement::Uniform]),
-        ("jittered ±30 %", vec![jitter(1), jitter(2), jitter(3)]),
+        ("quarter points", vec![Placement::Uniform], slip),
+        (
+            "jittered ±30 %",
+            vec![jitter(1), jitter(2), jitter(3)],
+            slip,
+        ),
+        (
+            "quarter points, fixed + slip walls",
+            vec![Placement::Uniform],
+            mixed,
+        ),
+        (
+            "jittered ±30 % (seed 1), fixed + slip walls",
+            vec![jitter(1)],
+            mixed,
+        ),
     ];
-    let mms = AxisAlignedMms::default();
     writeln!(
         md,
         "## {D}D\n\n| particles | method | cells | L2 error | energy error | run time (s), each |\n|---|---|---|---|---|---|"
@@ -587,7 +605,11 @@ fn placed_dimension<const D: usize>(
         "\n| particles | method | fitted L2 slope over the last three grids, each seed |\n|---|---|---|\n",
     );
     let mut series: Vec<Series> = Vec::new();
-    for (k, (pname, list)) in placements.iter().enumerate() {
+    for (k, (pname, list, walls)) in placements.iter().enumerate() {
+        let mms = AxisAlignedMms {
+            walls: *walls,
+            ..AxisAlignedMms::default()
+        };
         for (j, &(mname, shape, integration)) in methods.iter().enumerate() {
             let colour = COLORS[(2 * k + j) % COLORS.len()];
             let mut l2 = vec![Vec::new(); list.len()];

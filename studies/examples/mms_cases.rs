@@ -4,21 +4,24 @@
 //!
 //! ```text
 //! cargo run --release --example mms_cases -- PLACEMENT METHOD GRIDS [--found-surface] [--3d]
+//!                                                    [--mixed-walls]
 //!   PLACEMENT  gauss | uniform (the quarter points) | jitter:SEED (±30 % of the spacing)
 //!   METHOD     b2 | b3 | b2vc | b3vc | rk1vc | rk2 | rk2vc (RK2 with PIC, the rest APIC)
 //!   GRIDS      cells per side, comma-separated (16,32,64)
+//!   --mixed-walls  fixed walls on the low faces, slip walls on the high ones (slip everywhere
+//!                  without it)
 //! ```
 //!
 //! Prints the relative L2 and energy-norm errors and the run time per grid, and the L2 slope.
 
 use rkmpm::{Integration, Shape, Transfer};
 use rkmpm_studies::verification::{
-    fitted_slope, run_mms_placed, AxisAlignedMms, Placement, Surface,
+    fitted_slope, run_mms_placed, AxisAlignedMms, MmsWalls, Placement, Surface,
 };
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: mms_cases PLACEMENT METHOD GRIDS [--found-surface] [--3d]";
+    let usage = "usage: mms_cases PLACEMENT METHOD GRIDS [--found-surface] [--3d] [--mixed-walls]";
     let [placement, method, grids] = [0, 1, 2].map(|i| args.get(i).cloned().unwrap_or_default());
     let placement = match placement.as_str() {
         "gauss" => Placement::Gauss,
@@ -66,7 +69,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Surface::Exact
     };
     let three = args.iter().any(|a| a == "--3d");
-    let mms = AxisAlignedMms::default();
+    let walls = if args.iter().any(|a| a == "--mixed-walls") {
+        MmsWalls::FixedLowSlipHigh
+    } else {
+        MmsWalls::Slip
+    };
+    let mms = AxisAlignedMms {
+        walls,
+        ..AxisAlignedMms::default()
+    };
     let mut l2 = Vec::new();
     for &cells in &grids {
         let case = (cells, placement, surface, shape, integration, transfer);

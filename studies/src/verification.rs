@@ -17,12 +17,38 @@ use std::f64::consts::PI;
 /// with slip walls on every face (`u_a = 0` where `X_a` is 0 or 1) and the body force
 /// `b = ü − (1/ρ0) ∇_X·P` that makes it exact. `F` is diagonal:
 /// `F_aa = 1 + 2πA cos(2π X_a) sin(cπt + aπ)`; in 2D plane strain (`F_33 = 1`).
+///
+/// With [`MmsWalls::FixedLowSlipHigh`] each component is also multiplied by `sin(π X_b / 2)` for
+/// every other axis `b`: it vanishes on the fixed faces `X_b = 0` and is even about the slip
+/// faces `X_b = 1`, so the mirror images of both wall kinds continue it smoothly (`F` is then
+/// full, and the body force comes from the neo-Hookean elasticity tensor).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AxisAlignedMms {
     pub amplitude: f64,
     pub young: f64,
     pub poisson: f64,
     pub density: f64,
+    pub walls: MmsWalls,
+}
+
+/// The walls of the manufactured solution's box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MmsWalls {
+    /// Slip walls on every face: the published solution.
+    #[default]
+    Slip,
+    /// Fixed (no-slip) walls on the low faces (`X_a = 0`), slip walls on the high faces (`X_a = 1`).
+    FixedLowSlipHigh,
+}
+
+impl MmsWalls {
+    /// The walls to give the grid: `(low, high)` on every axis.
+    pub fn faces(&self) -> (Wall, Wall) {
+        match self {
+            MmsWalls::Slip => (Wall::Slip, Wall::Slip),
+            MmsWalls::FixedLowSlipHigh => (Wall::Fixed, Wall::Slip),
+        }
+    }
 }
 
 impl Default for AxisAlignedMms {
@@ -33,6 +59,7 @@ impl Default for AxisAlignedMms {
             young: 1e7,
             poisson: 0.3,
             density: 1000.0,
+            walls: MmsWalls::Slip,
         }
     }
 }
@@ -53,19 +80,57 @@ impl AxisAlignedMms {
         let arg = w * t + a as f64 * PI;
         (arg.sin(), w * arg.cos())
     }
+    /// The factor of component `c` along axis `b` and its first two derivatives at `x`: the
+    /// published `sin(2π X_c)` along its own axis, and along the others 1 (slip walls) or
+    /// `sin(π X_b / 2)` (fixed low faces).
+    fn factor(&self, c: usize, b: usize, x: f64) -> [f64; 3] {
+        let k = match (c == b, self.walls) {
+            (true, _) => 2.0 * PI,
+            (false, MmsWalls::Slip) => return [1.0, 0.0, 0.0],
+            (false, MmsWalls::FixedLowSlipHigh) => 0.5 * PI,
+        };
+        let (s, co) = (k * x).sin_cos();
+        [s, k * co, -k * k * s]
+    }
+    /// `∂^(d_0 + … ) u_c / ∂X_0^d_0 …` without its time factor and amplitude, for derivative
+    /// orders `d` (each 0, 1 or 2).
+    fn shape_derivative<const D: usize>(&self, c: usize, x: &Vector<D>, d: [usize; D]) -> f64 {
+        (0..D).map(|b| self.factor(c, b, x[b])[d[b]]).product()
+    }
     pub fn displacement<const D: usize>(&self, x: &Vector<D>, t: f64) -> Vector<D> {
+        if self.walls != MmsWalls::Slip {
+            return Vector::<D>::from_fn(|c, _| {
+                self.amplitude * self.shape_derivative(c, x, [0; D]) * self.phase(c, t).0
+            });
+        }
         Vector::<D>::from_fn(|a, _| self.amplitude * (2.0 * PI * x[a]).sin() * self.phase(a, t).0)
     }
     pub fn velocity<const D: usize>(&self, x: &Vector<D>, t: f64) -> Vector<D> {
+        if self.walls != MmsWalls::Slip {
+            return Vector::<D>::from_fn(|c, _| {
+                self.amplitude * self.shape_derivative(c, x, [0; D]) * self.phase(c, t).1
+            });
+        }
         Vector::<D>::from_fn(|a, _| self.amplitude * (2.0 * PI * x[a]).sin() * self.phase(a, t).1)
     }
     pub fn deformation_gradient<const D: usize>(&self, x: &Vector<D>, t: f64) -> Matrix<D> {
+        if self.walls != MmsWalls::Slip {
+            return Matrix::<D>::from_fn(|c, j| {
+                let mut d = [0; D];
+                d[j] = 1;
+                let grad = self.amplitude * self.shape_derivative(c, x, d) * self.phase(c, t).0;
+                grad + if c == j { 1.0 } else { 0.0 }
+            });
+        }
         Matrix::<D>::from_diagonal(&Vector::<D>::from_fn(|a, _| {
             1.0 + 2.0 * PI * self.amplitude * (2.0 * PI * x[a]).cos() * self.phase(a, t).0
         }))
     }
     /// Body force per unit mass at reference position `x` and time `t`.
     pub fn body_force<const D: usize>(&self, x: &Vector<D>, t: f64) -> Vector<D> {
+        if self.walls != MmsWalls::Slip {
+            return self.body_force_full(x, t);
+        }
         let (lambda, mu) = self.lame();
         let f = self.deformation_gradient(x, t);
         let lnj = (0..D).map(|a| f[(a, a)]).product::<f64>().ln();
@@ -78,6 +143,31 @@ impl AxisAlignedMms {
             let acc = -w * w * self.amplitude * (2.0 * PI * x[a]).sin() * s;
             acc - dp / self.density
         })
+    }
+    /// The body force `ü − (1/ρ0) ∇_X·P` for a full `F`: with `G_j = ∂F/∂X_j`, the neo-Hookean
+    /// `P = μ F + (λ ln J − μ) F⁻ᵀ` gives `∂P/∂X_j = μ G_j + λ tr(F⁻¹ G_j) F⁻ᵀ
+    /// − (λ ln J − μ) F⁻ᵀ G_jᵀ F⁻ᵀ` (plane strain in 2D: `F_33 = 1`).
+    fn body_force_full<const D: usize>(&self, x: &Vector<D>, t: f64) -> Vector<D> {
+        let (lambda, mu) = self.lame();
+        let f = self.deformation_gradient(x, t);
+        let finv = f.try_inverse().expect("the manufactured F is invertible");
+        let finv_t = finv.transpose();
+        let lnj = rkmpm::determinant(&f).ln();
+        let w = self.c() * PI;
+        let mut div = Vector::<D>::zeros();
+        for j in 0..D {
+            // (G_j)_kl = ∂²u_k / ∂X_l ∂X_j
+            let g = Matrix::<D>::from_fn(|k, l| {
+                let mut d = [0; D];
+                d[l] += 1;
+                d[j] += 1;
+                self.amplitude * self.shape_derivative(k, x, d) * self.phase(k, t).0
+            });
+            let dp = g * mu + finv_t * (lambda * (finv * g).trace())
+                - finv_t * g.transpose() * finv_t * (lambda * lnj - mu);
+            div += dp.column(j);
+        }
+        -self.displacement(x, t) * (w * w) - div / self.density
     }
 }
 
@@ -268,9 +358,10 @@ pub fn run_mms_placed<const D: usize>(
     sim.set_shape(shape)?;
     sim.set_transfer(transfer)?;
     sim.set_integration(integration)?;
+    let (low, high) = mms.walls.faces();
     for a in 0..D {
-        sim.set_wall(a, Side::Low, Wall::Slip)?;
-        sim.set_wall(a, Side::High, Wall::Slip)?;
+        sim.set_wall(a, Side::Low, low)?;
+        sim.set_wall(a, Side::High, high)?;
     }
     let mat = sim.add_material(Material::neo_hookean(mms.density, mms.young, mms.poisson)?);
     let (x, vol) = placement.particles::<D>(cells, ppc, h)?;
@@ -394,6 +485,93 @@ mod tests {
         let h = [0.1, 0.05, 0.025];
         let e: Vec<f64> = h.iter().map(|v: &f64| 3.0 * v.powf(2.5)).collect();
         assert!((fitted_slope(&h, &e) - 2.5).abs() < 1e-12);
+    }
+
+    fn points<const D: usize>() -> Vec<Vector<D>> {
+        let mut rng = UniformRng::new(7);
+        (0..20)
+            .map(|_| Vector::<D>::from_fn(|_, _| rng.uniform()))
+            .collect()
+    }
+
+    /// With slip walls the full-`F` body force is the published diagonal one, to round-off
+    /// (`1e-12` of its size; both sum about ten terms of size `μ A (2π)²`).
+    fn full_body_force_is_the_diagonal_one_with_slip_walls<const D: usize>() {
+        let mms = AxisAlignedMms::default();
+        for (k, x) in points::<D>().iter().enumerate() {
+            let t = 1e-3 * k as f64;
+            let (b, full) = (mms.body_force(x, t), mms.body_force_full(x, t));
+            assert!(
+                (b - full).norm() <= 1e-12 * b.norm(),
+                "{D}D: {b} against {full}"
+            );
+        }
+    }
+
+    #[test]
+    fn full_body_force_is_the_diagonal_one_with_slip_walls_2d_3d() {
+        full_body_force_is_the_diagonal_one_with_slip_walls::<2>();
+        full_body_force_is_the_diagonal_one_with_slip_walls::<3>();
+    }
+
+    /// The neo-Hookean first Piola–Kirchhoff stress (plane strain in 2D).
+    fn piola<const D: usize>(mms: &AxisAlignedMms, f: &Matrix<D>) -> Matrix<D> {
+        let (lambda, mu) = mms.lame();
+        let finv_t = f.try_inverse().unwrap().transpose();
+        f * mu + finv_t * (lambda * rkmpm::determinant(f).ln() - mu)
+    }
+
+    /// Fixed low faces, slip high faces: the displacement vanishes on `X_a = 0`; on `X_a = 1`
+    /// its normal component vanishes and the tangential ones are even (zero normal
+    /// derivative); and the body force closes the momentum balance, checked against `∇·P`
+    /// from fourth-order central differences of `P(F(X))` (step 1e-3: truncation about
+    /// `1e-12 (2π)⁵ A μ`, round-off about `1e-16 μ / 1e-3`, both below 1e-8 of `ρ0 |b|`).
+    fn mixed_walls_solution_is_exact<const D: usize>() {
+        let mms = AxisAlignedMms {
+            walls: MmsWalls::FixedLowSlipHigh,
+            ..AxisAlignedMms::default()
+        };
+        let t = 3e-3;
+        for x in points::<D>() {
+            for a in 0..D {
+                let (mut low, mut high) = (x, x);
+                low[a] = 0.0;
+                high[a] = 1.0;
+                assert!(mms.displacement(&low, t).norm() < 1e-17, "{D}D at {low}");
+                assert!(
+                    mms.displacement(&high, t)[a].abs() < 1e-17,
+                    "{D}D at {high}"
+                );
+                let f = mms.deformation_gradient(&high, t);
+                for c in (0..D).filter(|&c| c != a) {
+                    assert!(f[(c, a)].abs() < 1e-17, "{D}D ∂u_{c}/∂X_{a} at {high}");
+                }
+            }
+            let delta = 1e-3;
+            let mut div = Vector::<D>::zeros();
+            for j in 0..D {
+                let p = |s: f64| {
+                    let mut y = x;
+                    y[j] += s * delta;
+                    piola(&mms, &mms.deformation_gradient(&y, t))
+                };
+                let dp = (p(-2.0) - p(-1.0) * 8.0 + p(1.0) * 8.0 - p(2.0)) / (12.0 * delta);
+                div += dp.column(j);
+            }
+            let w = mms.c() * PI;
+            let expected = -mms.displacement(&x, t) * (w * w) - div / mms.density;
+            let b = mms.body_force(&x, t);
+            assert!(
+                (b - expected).norm() <= 1e-8 * b.norm(),
+                "{D}D at {x}: {b} against {expected}"
+            );
+        }
+    }
+
+    #[test]
+    fn mixed_walls_solution_is_exact_2d_3d() {
+        mixed_walls_solution_is_exact::<2>();
+        mixed_walls_solution_is_exact::<3>();
     }
 }
 
