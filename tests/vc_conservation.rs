@@ -125,8 +125,9 @@ fn vc_conserves_linear_momentum_3d() {
     conserves_momentum::<3>(100);
 }
 
-/// The 3D target over its 1000 steps (`cargo test --release --test vc_conservation -- --ignored`;
-/// RK2 + VC2 makes it long).
+/// The 3D target over its 1000 steps (`cargo test --release --test vc_conservation -- --ignored`):
+/// measured 5.4e-16, 2.2e-13, 2.2e-13 and 6.6e-16 in the order of `methods`; over half an hour
+/// on one thread, most of it RK2 + VC2.
 #[test]
 #[ignore = "long: the 3D momentum target over 1000 steps; the test command runs 100"]
 fn vc_conserves_linear_momentum_3d_over_1000_steps() {
