@@ -209,6 +209,12 @@ typedef struct RkmpmJohnsonCook {
 typedef uint32_t RkmpmField;
 
 /**
+ * How `rkmpm_sim_write_vtk` and `rkmpm_sim_write_vtk_frame` store the arrays
+ * (`rkmpm_sim_set_vtk_format`).
+ */
+typedef uint32_t RkmpmVtkFormat;
+
+/**
  * Linear hats (standard MPM).
  */
 #define RKMPM_SHAPE_LINEAR 0
@@ -267,6 +273,17 @@ typedef uint32_t RkmpmField;
  * Modified USL: a second momentum map before the velocity gradient.
  */
 #define RKMPM_SCHEME_MUSL 1
+
+/**
+ * Raw little-endian bytes appended after the XML, as ParaView writes them (the default): exact
+ * values, about a third of the text's size.
+ */
+#define RKMPM_VTK_BINARY 0
+
+/**
+ * Numbers as text, each the shortest decimal that reads back to the same value.
+ */
+#define RKMPM_VTK_ASCII 1
 
 /**
  * No condition (the default).
@@ -761,6 +778,15 @@ enum RkmpmStatus rkmpm_sim_get_particles(const struct RkmpmSim *sim,
  * `sim` must be a live handle; `path` a NUL-terminated string.
  */
 enum RkmpmStatus rkmpm_sim_write_vtk(const struct RkmpmSim *sim, const char *path);
+
+/**
+ * Sets how the VTK files written from now on store their arrays: `RKMPM_VTK_BINARY` (the
+ * default) or `RKMPM_VTK_ASCII`. A time series may mix both; ParaView and meshio read either.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_vtk_format(struct RkmpmSim *sim, RkmpmVtkFormat format);
 
 /**
  * Writes the next frame of the time series `prefix`: `<prefix>_NNNNN.vtu`, and rewrites

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Checks rkmpm's VTK output with a real reader: runs the vibrating bar (2D, 41 frames) and a short
-# Taylor bar (3D, 3 frames) with the runner into build/vtk-check/, then reads every .vtu with
+# Checks rkmpm's VTK output with a real reader: runs the vibrating bar (2D, 41 frames; binary, and
+# again in ASCII) and a short Taylor bar (3D, 3 frames, ASCII) with the runner into build/vtk-check/, then reads every .vtu with
 # meshio and the .pvd with xml.etree (tests/vtk/check_vtk.py) and checks the series, the arrays
 # and their shapes, the frame-0 particles and velocities and the bar's velocity after a period.
 #
@@ -68,7 +68,8 @@ run() {
 }
 echo "== runs into build/vtk-check/"
 run bar run bar --quiet --out "$out"
-run taylor run taylor --quiet --frames 2 --end-time 2e-6 --out "$out"
+run bar-ascii run bar --quiet --vtk ascii --out "$out/ascii"
+run taylor run taylor --quiet --frames 2 --end-time 2e-6 --vtk ascii --out "$out"
 
 echo "== tests/vtk/check_vtk.py build/vtk-check"
 "$venv/bin/python" tests/vtk/check_vtk.py "$out" || fail "the VTK output failed its checks (above)"

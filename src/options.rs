@@ -378,3 +378,19 @@ impl Default for FastPaths {
         }
     }
 }
+
+/// How VTK files store their arrays (`RKMPM_VTK_*`; scene files: `vtk` of `[run]`).
+#[repr(u32)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum VtkFormat {
+    /// Raw little-endian bytes appended after the XML (`<AppendedData encoding="raw">`), as
+    /// ParaView writes them: exact values, about a third of the text's size, written many times
+    /// faster.
+    #[default]
+    Binary = 0,
+    /// Numbers as text (`format="ascii"`), each the shortest decimal that reads back exactly.
+    Ascii = 1,
+}

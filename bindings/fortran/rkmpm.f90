@@ -74,6 +74,9 @@ module rkmpm
    ! RkmpmScheme (uint32_t)
    integer(c_int32_t), parameter, public :: RKMPM_SCHEME_USL = 0
    integer(c_int32_t), parameter, public :: RKMPM_SCHEME_MUSL = 1
+   ! RkmpmVtkFormat (uint32_t)
+   integer(c_int32_t), parameter, public :: RKMPM_VTK_BINARY = 0
+   integer(c_int32_t), parameter, public :: RKMPM_VTK_ASCII = 1
    ! RkmpmBoundary (uint32_t)
    integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_FREE = 0
    integer(c_int32_t), parameter, public :: RKMPM_BOUNDARY_FIXED = 1
@@ -194,6 +197,7 @@ module rkmpm
       procedure, private :: sim_get_particles_1d
       procedure, private :: sim_get_particles_2d
       generic :: get_particles => sim_get_particles_1d, sim_get_particles_2d
+      procedure :: set_vtk_format => sim_set_vtk_format
       procedure :: write_vtk => sim_write_vtk
       procedure :: write_vtk_frame => sim_write_vtk_frame
    end type rkmpm_sim
@@ -540,6 +544,14 @@ module rkmpm
          character(kind=c_char), intent(in) :: path(*)
          type(c_ptr), intent(out) :: out
       end function rkmpm_sim_load
+
+      ! enum RkmpmStatus rkmpm_sim_set_vtk_format(struct RkmpmSim *sim, RkmpmVtkFormat format);
+      integer(c_int) function rkmpm_sim_set_vtk_format(sim, format) &
+            bind(C, name="rkmpm_sim_set_vtk_format")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: format
+      end function rkmpm_sim_set_vtk_format
 
       ! enum RkmpmStatus rkmpm_sim_write_vtk(const struct RkmpmSim *sim, const char *path);
       integer(c_int) function rkmpm_sim_write_vtk(sim, path) bind(C, name="rkmpm_sim_write_vtk")
@@ -1265,6 +1277,18 @@ contains
    end subroutine sim_get_particles_2d
 
    !> Writes the particles to one VTK .vtu file at trim(path).
+   !> How the VTK files written from now on store their arrays: RKMPM_VTK_BINARY (the default)
+   !> or RKMPM_VTK_ASCII.
+   subroutine sim_set_vtk_format(self, format, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: format
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_set_vtk_format(self%h, format), 'set_vtk_format', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_vtk_format
+
    subroutine sim_write_vtk(self, path, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
       character(*), intent(in) :: path

@@ -16,7 +16,7 @@ pub mod gate;
 pub mod status;
 
 use gate::{check_ptr, checked_len, gate, kind_of, slice, Failure};
-use rkmpm::io::vtk::{self, VtkSeries};
+use rkmpm::io::vtk::{self, VtkFormat, VtkSeries};
 use rkmpm::material::Material;
 use rkmpm::options::{Integration, Scheme, Shape, Side, Transfer, Wall};
 use rkmpm::particles::Field;
@@ -68,6 +68,15 @@ pub const RKMPM_SCHEME_USL: RkmpmScheme = 0;
 /// Modified USL: a second momentum map before the velocity gradient.
 pub const RKMPM_SCHEME_MUSL: RkmpmScheme = 1;
 
+/// How `rkmpm_sim_write_vtk` and `rkmpm_sim_write_vtk_frame` store the arrays
+/// (`rkmpm_sim_set_vtk_format`).
+pub type RkmpmVtkFormat = u32;
+/// Raw little-endian bytes appended after the XML, as ParaView writes them (the default): exact
+/// values, about a third of the text's size.
+pub const RKMPM_VTK_BINARY: RkmpmVtkFormat = 0;
+/// Numbers as text, each the shortest decimal that reads back to the same value.
+pub const RKMPM_VTK_ASCII: RkmpmVtkFormat = 1;
+
 /// Condition on a grid face (`rkmpm_sim_set_boundary`).
 pub type RkmpmBoundary = u32;
 /// No condition (the default).
@@ -108,7 +117,9 @@ pub const RKMPM_FIELD_DAMAGE: RkmpmField = 10;
 // the engine, scene files and checkpoints use; cbindgen needs them as literals, so they are
 // checked here when the crate compiles.
 const _: () = {
-    use rkmpm::options::{IntegrationKind as I, ShapeKind as S, TransferKind as T, WallKind as W};
+    use rkmpm::options::{
+        IntegrationKind as I, ShapeKind as S, TransferKind as T, VtkFormat as V, WallKind as W,
+    };
     assert!(RKMPM_SHAPE_LINEAR == S::Linear as u32);
     assert!(RKMPM_SHAPE_BSPLINE2 == S::Bspline2 as u32);
     assert!(RKMPM_SHAPE_BSPLINE3 == S::Bspline3 as u32);
@@ -120,6 +131,8 @@ const _: () = {
     assert!(RKMPM_TRANSFER_MLS == T::Mls as u32);
     assert!(RKMPM_SCHEME_USL == Scheme::Usl as u32);
     assert!(RKMPM_SCHEME_MUSL == Scheme::Musl as u32);
+    assert!(RKMPM_VTK_BINARY == V::Binary as u32);
+    assert!(RKMPM_VTK_ASCII == V::Ascii as u32);
     assert!(RKMPM_BOUNDARY_FREE == W::Free as u32);
     assert!(RKMPM_BOUNDARY_FIXED == W::Fixed as u32);
     assert!(RKMPM_BOUNDARY_SLIP == W::Slip as u32);
@@ -180,6 +193,8 @@ enum AnySim {
 pub struct RkmpmSim {
     sim: AnySim,
     series: Vec<VtkSeries>,
+    /// The format of the VTK files written from now on.
+    vtk_format: VtkFormat,
     /// The progress callback of `rkmpm_sim_advance` and its user data.
     progress: RkmpmProgressFn,
     progress_data: *mut c_void,
@@ -330,6 +345,7 @@ pub unsafe extern "C" fn rkmpm_sim_new(
         let handle = Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
+            vtk_format: VtkFormat::default(),
             progress: None,
             progress_data: std::ptr::null_mut(),
         }));
@@ -385,6 +401,7 @@ pub unsafe extern "C" fn rkmpm_sim_load(
         let handle = Box::into_raw(Box::new(RkmpmSim {
             sim,
             series: Vec::new(),
+            vtk_format: VtkFormat::default(),
             progress: None,
             progress_data: std::ptr::null_mut(),
         }));
@@ -1269,7 +1286,25 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk(
         let s = unsafe { sim_ref(sim) }?;
         // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
         let path = unsafe { c_path("path", path) }?;
-        with_sim!(&s.sim, m => vtk::write_particles(m, path))?;
+        with_sim!(&s.sim, m => vtk::write_particles(m, path, s.vtk_format))?;
+        Ok(())
+    })
+}
+
+/// Sets how the VTK files written from now on store their arrays: `RKMPM_VTK_BINARY` (the
+/// default) or `RKMPM_VTK_ASCII`. A time series may mix both; ParaView and meshio read either.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_vtk_format(
+    sim: *mut RkmpmSim,
+    format: RkmpmVtkFormat,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_vtk_format", || {
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        s.vtk_format = kind_of("format", format)?;
         Ok(())
     })
 }
@@ -1307,6 +1342,7 @@ pub unsafe extern "C" fn rkmpm_sim_write_vtk_frame(
             }
         };
         let series = &mut s.series[k];
+        series.set_format(s.vtk_format);
         with_sim!(&s.sim, m => series.write_frame(m))?;
         Ok(())
     })

@@ -510,6 +510,18 @@ static unsigned char *read_file(const char *path, size_t *len) {
   return b;
 }
 
+/* Whether the file at `path` holds the bytes of `text` (binary files too). */
+static int file_contains(const char *path, const char *text) {
+  size_t len = 0, k = strlen(text);
+  unsigned char *b = read_file(path, &len);
+  int found = 0;
+  for (size_t i = 0; !found && i + k <= len; i++) {
+    found = memcmp(b + i, text, k) == 0;
+  }
+  free(b);
+  return found;
+}
+
 static void write_file(const char *path, const unsigned char *bytes, size_t len) {
   FILE *f = fopen(path, "wb");
   if (f == NULL || fwrite(bytes, 1, len, f) != len || fclose(f) != 0) {
@@ -2392,6 +2404,21 @@ static void file_rows(void) {
     remove(scratch(written[k]));
   }
 
+  /* ---- rkmpm_sim_set_vtk_format ---- */
+  ROW("set_vtk_format.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_vtk_format(NULL, RKMPM_VTK_ASCII));
+  }
+  ROW("set_vtk_format.unknown_format", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_set_vtk_format(f.sim, 2));
+    CALL(f.sim, rkmpm_sim_set_vtk_format(f.sim, UINT32_MAX));
+    EXPECT(rkmpm_sim_write_vtk(f.sim, scratch("api_checks_format.vtu")) == RKMPM_OK,
+           "the write after a refused format failed");
+    EXPECT(file_contains(scratch("api_checks_format.vtu"), "encoding=\"raw\""),
+           "the format changed although it was refused");
+    remove(scratch("api_checks_format.vtu"));
+    drop(&f);
+  }
   /* ---- rkmpm_sim_write_vtk ---- */
   ROW("write_vtk.null_sim", RKMPM_ERR_NULL_POINTER) {
     CALL(NULL, rkmpm_sim_write_vtk(NULL, scratch("api_checks_never.vtu")));

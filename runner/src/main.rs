@@ -79,6 +79,10 @@ struct RunArgs {
     /// Overrides the scene's run.frames (VTK frames over the run; 0 writes none).
     #[arg(long)]
     frames: Option<usize>,
+    /// Overrides the scene's run.vtk: the frames' arrays as raw bytes (binary, as ParaView
+    /// writes them) or as text (ascii).
+    #[arg(long, value_name = "FORMAT", value_parser = ["binary", "ascii"])]
+    vtk: Option<String>,
     /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
     #[arg(long)]
     cfl: Option<f64>,
@@ -239,6 +243,12 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(c) = args.cfl {
         scene.run.cfl = c;
     }
+    if let Some(f) = &args.vtk {
+        scene.run.vtk = match f.as_str() {
+            "ascii" => rkmpm::options::VtkFormat::Ascii,
+            _ => rkmpm::options::VtkFormat::Binary,
+        };
+    }
     if let Some(p) = &args.png {
         scene.run.png = (p != "none").then(|| p.clone());
     }
@@ -324,6 +334,7 @@ fn run_scene<const D: usize>(
     let run = &scene.run;
     let end = run.end_time;
     let mut series = VtkSeries::new(args.out.join(&run.output));
+    series.set_format(run.vtk);
     // Progress is updated once per chunk; a frame is written every `per_frame` chunks.
     let per_frame = if run.frames == 0 {
         1

@@ -33,8 +33,8 @@
 use rkmpm::error::{Error, ErrorKind, Result};
 use rkmpm::material::{JohnsonCookParameters, Material, MieGruneisen};
 use rkmpm::options::{
-    Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind, Wall,
-    WallKind,
+    Integration, IntegrationKind, Scheme, Shape, ShapeKind, Side, Transfer, TransferKind,
+    VtkFormat, Wall, WallKind,
 };
 use rkmpm::sim::Sim;
 use rkmpm::Vector;
@@ -287,6 +287,10 @@ pub struct RunSpec {
     /// output directory).
     #[serde(default = "default_output")]
     pub output: String,
+    /// How the frames store their arrays: `binary` (raw bytes after the XML, as ParaView
+    /// writes them) or `ascii`.
+    #[serde(default)]
+    pub vtk: VtkFormat,
     /// At the end, a PNG of the particles coloured by this field (`<output>.png`).
     #[serde(default)]
     pub png: Option<String>,

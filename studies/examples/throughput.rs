@@ -19,7 +19,9 @@
 //! `--material neo-hookean|drucker-prager` (Drucker–Prager with a cohesion so high that the
 //! block stays elastic, so the return mapping runs and finds nothing), `--padding CELLS` (that
 //! many more empty cells on every side), `--memory` (bytes per particle and per node on
-//! stderr); the defaults are the benchmark block below. A step the
+//! stderr), `--vtk DIR` (after the timed steps, writes the particles as one `.vtu` file into
+//! `DIR` in each format, binary and ASCII, three times each, and gives on stderr each format's
+//! size and best write time); the defaults are the benchmark block below. A step the
 //! engine rejects (an inverted particle, say) ends the timing: the line reports the steps before
 //! it (at least `--min-steps`) and the error goes to stderr.
 //!
@@ -69,6 +71,7 @@ struct Args {
     memory: bool,
     shuffle: bool,
     sort: bool,
+    vtk: Option<std::path::PathBuf>,
 }
 
 fn parse() -> Result<Args, String> {
@@ -91,6 +94,7 @@ fn parse() -> Result<Args, String> {
         memory: false,
         shuffle: false,
         sort: true,
+        vtk: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -118,6 +122,7 @@ fn parse() -> Result<Args, String> {
             "--memory" => a.memory = true,
             "--shuffle" => a.shuffle = true,
             "--no-sort" => a.sort = false,
+            "--vtk" => a.vtk = Some(val()?.into()),
             "--material" => a.material = val()?,
             "--padding" => a.padding = val()?.parse().map_err(|e| format!("--padding: {e}"))?,
             "-h" | "--help" => {
@@ -126,7 +131,7 @@ fn parse() -> Result<Args, String> {
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
-                     [--padding CELLS] [--memory] [--shuffle] [--no-sort]"
+                     [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--vtk DIR]"
                         .into(),
                 )
             }
@@ -308,6 +313,25 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
             m.grid as f64 / m.active_nodes.max(1) as f64,
             (m.particles + m.particle_workspace + m.grid) as f64 / 1e9
         );
+    }
+    if let Some(dir) = &a.vtk {
+        use rkmpm::io::vtk::{write_particles, VtkFormat};
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        for (format, name) in [(VtkFormat::Binary, "binary"), (VtkFormat::Ascii, "ascii")] {
+            let path = dir.join(format!("throughput_{name}.vtu"));
+            let mut best = f64::INFINITY;
+            for _ in 0..3 {
+                let start = Instant::now();
+                write_particles(&sim, &path, format).map_err(|e| e.message)?;
+                best = best.min(start.elapsed().as_secs_f64());
+            }
+            let bytes = std::fs::metadata(&path).map_err(|e| e.to_string())?.len();
+            eprintln!(
+                "vtk {name}: {:.1} MB ({:.1} B per particle), written in {best:.3} s (best of 3)",
+                bytes as f64 / 1e6,
+                bytes as f64 / total as f64
+            );
+        }
     }
     let ps = sim.particles();
     let ke: f64 = ps

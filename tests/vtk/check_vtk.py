@@ -6,8 +6,10 @@
 
 DIR holds the output of
     rkmpm run bar --quiet --out DIR
-    rkmpm run taylor --quiet --frames 2 --end-time 2e-6 --out DIR
-(scripts/test-vtk.sh runs them and this). The scene parameters are read from runner/scenes/bar.toml and
+    rkmpm run bar --quiet --vtk ascii --out DIR/ascii
+    rkmpm run taylor --quiet --frames 2 --end-time 2e-6 --vtk ascii --out DIR
+(scripts/test-vtk.sh runs them and this): binary frames (the default) and ASCII ones, which must
+hold the same values bit for bit. The scene parameters are read from runner/scenes/bar.toml and
 runner/scenes/taylor.toml; the Taylor overrides are TAYLOR_FRAMES and TAYLOR_END_TIME below.
 
 Prints one line per check group and exits 1 listing every failed check.
@@ -413,12 +415,56 @@ def check_taylor(out):
     )
 
 
+def vtk_format(path):
+    """How a .vtu stores its arrays, read from its bytes: "binary" (every array appended, raw)
+    or "ascii" (every array as text), else "mixed"."""
+    data = path.read_bytes()
+    xml = data.split(b"<AppendedData", 1)[0]
+    appended = xml.count(b'format="appended"')
+    ascii_ = xml.count(b'format="ascii"') - 1  # less the TimeValue field, text in both
+    raw = b'<AppendedData encoding="raw">' in data
+    if appended > 0 and ascii_ == 0 and raw:
+        return "binary"
+    if appended == 0 and ascii_ > 0 and not raw:
+        return "ascii"
+    return "mixed"
+
+
+def check_formats(out):
+    """The bar's frames binary, the Taylor bar's ASCII (--vtk ascii), and the bar's ASCII run
+    the same values as its binary run, bit for bit, frame by frame."""
+    binary = sorted(out.glob("bar_*.vtu"))
+    text = sorted((out / "ascii").glob("bar_*.vtu"))
+    require(binary, "formats: no bar frames")
+    for path in binary:
+        check(vtk_format(path) == "binary", f"{path.name}: {vtk_format(path)}, expected binary")
+    for path in sorted(out.glob("taylor_*.vtu")) + text:
+        check(vtk_format(path) == "ascii", f"{path}: {vtk_format(path)}, expected ascii")
+    require(
+        [p.name for p in text] == [p.name for p in binary],
+        f"formats: ascii/ holds {len(text)} bar frames, the binary run {len(binary)}",
+    )
+    size = [sum(p.stat().st_size for p in paths) for paths in (binary, text)]
+    for b, a in zip(binary, text):
+        mb, ma = meshio.vtu.read(b), meshio.vtu.read(a)
+        check(np.array_equal(mb.points, ma.points), f"{b.name}: points differ between the formats")
+        for name in ARRAYS:
+            check(
+                np.array_equal(mb.point_data[name], ma.point_data[name]),
+                f"{b.name}: {name} differs between the formats",
+            )
+    print(
+        f"  formats: {len(binary)} bar frames equal bit for bit in binary and ASCII; "
+        f"binary {size[0] / 1e6:.2f} MB, ASCII {size[1] / 1e6:.2f} MB"
+    )
+
+
 def main():
     if len(sys.argv) != 2:
         print(__doc__, file=sys.stderr)
         return 2
     out = Path(sys.argv[1])
-    for name, run in (("bar", check_bar), ("taylor", check_taylor)):
+    for name, run in (("bar", check_bar), ("taylor", check_taylor), ("formats", check_formats)):
         before = len(failures)
         try:
             run(out)

@@ -302,6 +302,27 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         // 11: a file that cannot be written.
         let path = c"/nonexistent-dir/x.vtu";
         assert_eq!(rkmpm_sim_write_vtk(sim, path.as_ptr()), RKMPM_ERR_IO);
+        // The VTK format: binary by default, ASCII on request, an unknown one refused.
+        let file =
+            std::env::temp_dir().join(format!("rkmpm-capi-format-{}.vtu", std::process::id()));
+        let c_file = std::ffi::CString::new(file.to_str().unwrap()).unwrap();
+        let appended = |sim| {
+            assert_eq!(rkmpm_sim_write_vtk(sim, c_file.as_ptr()), RKMPM_OK);
+            let bytes = std::fs::read(&file).unwrap();
+            bytes
+                .windows(29)
+                .any(|w| w == b"<AppendedData encoding=\"raw\">")
+        };
+        assert!(appended(sim));
+        assert_eq!(rkmpm_sim_set_vtk_format(sim, 7), RKMPM_ERR_INVALID_ARGUMENT);
+        assert!(last_error().contains("format = 7"), "{}", last_error());
+        assert!(appended(sim));
+        assert_eq!(rkmpm_sim_set_vtk_format(sim, RKMPM_VTK_ASCII), RKMPM_OK);
+        assert!(!appended(sim));
+        assert!(std::str::from_utf8(&std::fs::read(&file).unwrap()).is_ok());
+        assert_eq!(rkmpm_sim_set_vtk_format(sim, RKMPM_VTK_BINARY), RKMPM_OK);
+        assert!(appended(sim));
+        std::fs::remove_file(&file).unwrap();
 
         // Nothing above changed the particles, the time or the step count.
         assert_eq!(positions(sim), x0);
