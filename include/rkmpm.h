@@ -204,6 +204,43 @@ typedef struct RkmpmJohnsonCook {
 } RkmpmJohnsonCook;
 
 /**
+ * The energies of the particles at one instant (per unit thickness in 2D), from
+ * `rkmpm_sim_energies`. Their sum changes over a run by what it dissipated (plastic work and
+ * damage, friction and impacts at walls, contact, the transfer's and the time integration's
+ * numerical dissipation) and by the work of a body-force callback; none of these is included.
+ */
+typedef struct RkmpmEnergies {
+  /**
+   * `1/2 sum m_p |v_p|^2`.
+   */
+  double kinetic;
+  /**
+   * `sum V0_p W(F_p)`: the stored (elastic) energy of every material.
+   */
+  double stored;
+  /**
+   * `-sum m_p g.x_p`: the potential of the gravity set now, zero at the coordinates' origin.
+   */
+  double gravitational;
+} RkmpmEnergies;
+
+/**
+ * The particles' momenta at one instant (per unit thickness in 2D), from `rkmpm_sim_momenta`.
+ */
+typedef struct RkmpmMomenta {
+  /**
+   * `sum m_p v_p` (the third component 0 in 2D).
+   */
+  double linear[3];
+  /**
+   * `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0). Under
+   * APIC the particles' affine velocities carry angular momentum of their own (Jiang et al.
+   * 2015), which this sum leaves out.
+   */
+  double angular[3];
+} RkmpmMomenta;
+
+/**
  * Particle quantity (`rkmpm_sim_get_particles`); the comment gives the values per particle.
  */
 typedef uint32_t RkmpmField;
@@ -722,6 +759,22 @@ enum RkmpmStatus rkmpm_sim_advance(struct RkmpmSim *sim,
                                    double duration,
                                    double cfl,
                                    uint64_t *out_steps);
+
+/**
+ * Writes the kinetic, stored and gravitational energies of the particles to `*out`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_energies(const struct RkmpmSim *sim, struct RkmpmEnergies *out);
+
+/**
+ * Writes the particles' total linear and angular momentum to `*out`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_momenta(const struct RkmpmSim *sim, struct RkmpmMomenta *out);
 
 /**
  * Writes the simulated time to `*out_time`.

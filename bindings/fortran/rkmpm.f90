@@ -106,6 +106,19 @@ module rkmpm
       real(c_double) :: eos_sound_speed = 0, eos_slope = 0, eos_gamma0 = 0
    end type rkmpm_johnson_cook
 
+   !> The energies of the particles at one instant (struct RkmpmEnergies; per unit thickness in
+   !> 2D): kinetic, stored (elastic) and the potential of the gravity set now. What a run
+   !> dissipated (plasticity, damage, walls, contact, the scheme) is not among them.
+   type, bind(C), public :: rkmpm_energies
+      real(c_double) :: kinetic = 0, stored = 0, gravitational = 0
+   end type rkmpm_energies
+
+   !> The particles' linear momentum and angular momentum about the origin (struct
+   !> RkmpmMomenta; third components 0, and in 2D only angular(3) not 0).
+   type, bind(C), public :: rkmpm_momenta
+      real(c_double) :: linear(3) = 0, angular(3) = 0
+   end type rkmpm_momenta
+
    ! Sides of a grid face (rkmpm_sim_set_boundary)
    integer(c_int32_t), parameter, public :: RKMPM_SIDE_LOW = -1
    integer(c_int32_t), parameter, public :: RKMPM_SIDE_HIGH = 1
@@ -191,6 +204,8 @@ module rkmpm
       procedure :: step => sim_step
       procedure :: advance => sim_advance
       procedure :: time => sim_time
+      procedure :: energies => sim_energies
+      procedure :: momenta => sim_momenta
       procedure :: step_count => sim_step_count
       procedure :: particle_count => sim_particle_count
       procedure :: field_len => sim_field_len
@@ -497,6 +512,20 @@ module rkmpm
          type(c_ptr), value :: sim
          real(c_double), intent(out) :: out_time
       end function rkmpm_sim_time
+
+      ! enum RkmpmStatus rkmpm_sim_energies(const struct RkmpmSim *sim, struct RkmpmEnergies *out);
+      integer(c_int) function rkmpm_sim_energies(sim, out) bind(C, name="rkmpm_sim_energies")
+         import :: c_int, c_ptr, rkmpm_energies
+         type(c_ptr), value :: sim
+         type(rkmpm_energies), intent(out) :: out
+      end function rkmpm_sim_energies
+
+      ! enum RkmpmStatus rkmpm_sim_momenta(const struct RkmpmSim *sim, struct RkmpmMomenta *out);
+      integer(c_int) function rkmpm_sim_momenta(sim, out) bind(C, name="rkmpm_sim_momenta")
+         import :: c_int, c_ptr, rkmpm_momenta
+         type(c_ptr), value :: sim
+         type(rkmpm_momenta), intent(out) :: out
+      end function rkmpm_sim_momenta
 
       ! enum RkmpmStatus rkmpm_sim_step_count(const struct RkmpmSim *sim, uint64_t *out_steps);
       integer(c_int) function rkmpm_sim_step_count(sim, out_steps) bind(C, name="rkmpm_sim_step_count")
@@ -1185,6 +1214,30 @@ contains
    end subroutine sim_advance
 
    !> The simulated time.
+   !> The energies of the particles now.
+   type(rkmpm_energies) function sim_energies(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      type(rkmpm_energies) :: e
+      call report(rkmpm_sim_energies(self%h, e), 'energies', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_energies = e
+   end function sim_energies
+
+   !> The particles' linear and angular momentum now.
+   type(rkmpm_momenta) function sim_momenta(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      type(rkmpm_momenta) :: p
+      call report(rkmpm_sim_momenta(self%h, p), 'momenta', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_momenta = p
+   end function sim_momenta
+
    real(c_double) function sim_time(self, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
       integer(c_int), intent(out), optional :: stat

@@ -1162,6 +1162,81 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
     })
 }
 
+/// The energies of the particles at one instant (per unit thickness in 2D), from
+/// `rkmpm_sim_energies`. Their sum changes over a run by what it dissipated (plastic work and
+/// damage, friction and impacts at walls, contact, the transfer's and the time integration's
+/// numerical dissipation) and by the work of a body-force callback; none of these is included.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RkmpmEnergies {
+    /// `1/2 sum m_p |v_p|^2`.
+    pub kinetic: f64,
+    /// `sum V0_p W(F_p)`: the stored (elastic) energy of every material.
+    pub stored: f64,
+    /// `-sum m_p g.x_p`: the potential of the gravity set now, zero at the coordinates' origin.
+    pub gravitational: f64,
+}
+
+/// The particles' momenta at one instant (per unit thickness in 2D), from `rkmpm_sim_momenta`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RkmpmMomenta {
+    /// `sum m_p v_p` (the third component 0 in 2D).
+    pub linear: [f64; 3],
+    /// `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0). Under
+    /// APIC the particles' affine velocities carry angular momentum of their own (Jiang et al.
+    /// 2015), which this sum leaves out.
+    pub angular: [f64; 3],
+}
+
+/// Writes the kinetic, stored and gravitational energies of the particles to `*out`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_energies(
+    sim: *const RkmpmSim,
+    out: *mut RkmpmEnergies,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_energies", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        check_ptr("out", out)?;
+        let e = with_sim!(&s.sim, m => m.energies());
+        let value = RkmpmEnergies {
+            kinetic: e.kinetic,
+            stored: e.stored,
+            gravitational: e.gravitational,
+        };
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out", out, value) }
+    })
+}
+
+/// Writes the particles' total linear and angular momentum to `*out`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_momenta(
+    sim: *const RkmpmSim,
+    out: *mut RkmpmMomenta,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_momenta", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        check_ptr("out", out)?;
+        let mut value = RkmpmMomenta::default();
+        with_sim!(&s.sim, m => {
+            let p = m.momenta();
+            value.linear[..p.linear.len()].copy_from_slice(p.linear.as_slice());
+            value.angular.copy_from_slice(p.angular.as_slice());
+        });
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out", out, value) }
+    })
+}
+
 /// Writes the simulated time to `*out_time`.
 ///
 /// # Safety

@@ -828,6 +828,41 @@ static void lifetime_rows(void) {
     drop(&f);
   }
 
+  ROW("energies.null_sim", RKMPM_ERR_NULL_POINTER) {
+    RkmpmEnergies e = {77.0, 77.0, 77.0};
+    CALL(NULL, rkmpm_sim_energies(NULL, &e));
+    EXPECT(e.kinetic == 77.0 && e.gravitational == 77.0, "wrote the output after a failure");
+  }
+  ROW("energies.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = stepped_block(2);
+    CALL(f.sim, rkmpm_sim_energies(f.sim, NULL));
+    drop(&f);
+  }
+  ROW("energies.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = stepped_block(2);
+    memset(raw, 0, sizeof raw);
+    CALL(f.sim, rkmpm_sim_energies(f.sim, misaligned(raw)));
+    EXPECT(raw[1] == 0 && raw[9] == 0, "wrote through a misaligned out pointer");
+    drop(&f);
+  }
+  ROW("momenta.null_sim", RKMPM_ERR_NULL_POINTER) {
+    RkmpmMomenta p = {{77.0, 77.0, 77.0}, {77.0, 77.0, 77.0}};
+    CALL(NULL, rkmpm_sim_momenta(NULL, &p));
+    EXPECT(p.linear[0] == 77.0 && p.angular[2] == 77.0, "wrote the output after a failure");
+  }
+  ROW("momenta.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = stepped_block(2);
+    CALL(f.sim, rkmpm_sim_momenta(f.sim, NULL));
+    drop(&f);
+  }
+  ROW("momenta.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = stepped_block(3);
+    memset(raw, 0, sizeof raw);
+    CALL(f.sim, rkmpm_sim_momenta(f.sim, misaligned(raw)));
+    EXPECT(raw[1] == 0 && raw[9] == 0, "wrote through a misaligned out pointer");
+    drop(&f);
+  }
+
   ROW("step_count.null_sim", RKMPM_ERR_NULL_POINTER) {
     uint64_t n = 77;
     CALL(NULL, rkmpm_sim_step_count(NULL, &n));

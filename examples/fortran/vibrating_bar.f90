@@ -30,6 +30,9 @@ program vibrating_bar
    real(c_double) :: a, b, t_down, t_up, relative_error, measured, period_error
    real(c_double), allocatable :: x(:, :), v(:, :), vol(:), mass(:), x_ref(:, :), t_hist(:), v_hist(:)
    logical :: failed, mls
+   type(rkmpm_energies) :: e0, e1
+   type(rkmpm_momenta) :: pm
+   real(c_double) :: kinetic, linear(3), angular(3), xp(3), vp(3)
 
    if (command_argument_count() /= 2 .and. command_argument_count() /= 3) call usage()
    mls = .false.
@@ -128,6 +131,34 @@ program vibrating_bar
    sin_average = weighted_sin/total_mass
    amplitude = v0*sin_average
 
+   ! The energies and momenta the library reports are the particles' own sums (the initial
+   ! state: no stress, no gravity).
+   e0 = sim%energies()
+   pm = sim%momenta()
+   kinetic = 0
+   linear = 0
+   angular = 0
+   do p = 1, count
+      xp = 0
+      vp = 0
+      xp(1:dim) = x(:, p)
+      vp(1:dim) = v(:, p)
+      kinetic = kinetic + 0.5_c_double*mass(p)*sum(vp**2)
+      linear = linear + mass(p)*vp
+      angular = angular + mass(p)*[xp(2)*vp(3) - xp(3)*vp(2), xp(3)*vp(1) - xp(1)*vp(3), &
+                                   xp(1)*vp(2) - xp(2)*vp(1)]
+   end do
+   if (abs(e0%kinetic - kinetic) > 1e-12_c_double*kinetic .or. e0%stored /= 0 .or. &
+       e0%gravitational /= 0) then
+      write (error_unit, '(a, 3es24.16)') 'energies ', e0%kinetic, e0%stored, e0%gravitational
+      error stop 'sim%energies() is not the particles'' kinetic energy'
+   end if
+   if (any(abs(pm%linear - linear) > 1e-12_c_double*maxval(abs(linear))) .or. &
+       any(abs(pm%angular - angular) > 1e-12_c_double*maxval(abs(angular)))) then
+      write (error_unit, '(a, 6es24.16)') 'momenta ', pm%linear, pm%angular
+      error stop 'sim%momenta() is not the particles'' momenta'
+   end if
+
    ! Time step: CFL 0.2 of the initial state; the last step is shortened to end on T.
    dt = sim%stable_dt(cfl)
    steps = int(ceiling(period/dt - 1e-9_c_double))
@@ -197,6 +228,17 @@ program vibrating_bar
          write (output_unit, '(a)') '  FAIL: period error above 1%'
          failed = .true.
       end if
+   end if
+
+   ! Energy after one period: no gravity, and the fixed end does no work, so what is gone is
+   ! the scheme's.
+   e1 = sim%energies()
+   write (output_unit, '(a, es12.6, a, es12.6, a, es12.6, a)') '  energy: kinetic + stored ', &
+      e0%kinetic + e0%stored, ' at the start, ', e1%kinetic + e1%stored, ' after a period (', &
+      e1%stored, ' stored)'
+   if (.not. (e1%kinetic + e1%stored <= 1.01_c_double*(e0%kinetic + e0%stored))) then
+      write (output_unit, '(a)') '  FAIL: the bar gained more than 1% energy'
+      failed = .true.
    end if
 
    ! Final state: positions then velocities, one particle per line.

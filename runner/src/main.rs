@@ -7,6 +7,7 @@
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use rkmpm::io::vtk::VtkSeries;
+use rkmpm::sim::{Energies, Momenta};
 use rkmpm::Sim;
 use rkmpm_runner::scene::{Scene, SceneSim, BUNDLED};
 use rkmpm_studies::scenes::{run_vibrating_bar, VibratingBar};
@@ -359,8 +360,7 @@ fn run_scene<const D: usize>(
     } else {
         ProgressBar::hidden()
     };
-    let p0 = sim.particles().momentum();
-    let e0 = sim.particles().kinetic_energy() + sim.strain_energy();
+    let (p0, e0) = (sim.momenta(), sim.energies());
     let n = sim.particles().len() as f64;
     let start = Instant::now();
     let frame = |series: &mut VtkSeries, sim: &Sim<D>| {
@@ -415,19 +415,26 @@ fn run_scene<const D: usize>(
 
 fn summary<const D: usize>(
     sim: &Sim<D>,
-    p0: rkmpm::Vector<D>,
-    e0: f64,
+    p0: Momenta<D>,
+    e0: Energies,
     wall: f64,
     series: &VtkSeries,
 ) {
     let ps = sim.particles();
-    let p1 = ps.momentum();
-    let e1 = ps.kinetic_energy() + sim.strain_energy();
-    let fmt = |v: &rkmpm::Vector<D>| {
+    let (p1, e1) = (sim.momenta(), sim.energies());
+    let fmt = |v: &[f64]| {
         v.iter()
             .map(|c| format!("{c:.4e}"))
             .collect::<Vec<_>>()
             .join(", ")
+    };
+    // The angular momentum about the origin: its z component in 2D, the vector in 3D.
+    let angular = |p: &Momenta<D>| {
+        if D == 2 {
+            format!("{:.4e}", p.angular[2])
+        } else {
+            format!("({})", fmt(p.angular.as_slice()))
+        }
     };
     println!(
         "steps: {}, simulated time: {:.4e} s, wall time: {:.2} s, {:.2e} particle-steps/s",
@@ -436,11 +443,29 @@ fn summary<const D: usize>(
         wall,
         ps.len() as f64 * sim.steps() as f64 / wall.max(1e-9)
     );
-    println!("momentum: start ({}), end ({})", fmt(&p0), fmt(&p1));
     println!(
-        "energy: kinetic + stored {e0:.4e} at the start, {:.4e} + {:.4e} = {e1:.4e} at the end",
-        ps.kinetic_energy(),
-        sim.strain_energy()
+        "momentum: start ({}), end ({}); angular about the origin {} -> {} (without APIC's \
+         affine part)",
+        fmt(p0.linear.as_slice()),
+        fmt(p1.linear.as_slice()),
+        angular(&p0),
+        angular(&p1)
+    );
+    let line = |e: &Energies| {
+        format!(
+            "kinetic {:.4e} + stored {:.4e} + gravitational {:.4e} = {:.4e}",
+            e.kinetic,
+            e.stored,
+            e.gravitational,
+            e.total()
+        )
+    };
+    println!("energy at the start: {}", line(&e0));
+    println!("energy at the end:   {}", line(&e1));
+    println!(
+        "energy change {:.4e}: what plasticity, damage, walls, contact and the scheme (transfer \
+         and time integration) dissipated",
+        e1.total() - e0.total()
     );
     let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     if !ps.history.is_empty() {

@@ -30,9 +30,35 @@ fn runs_a_bundled_scene_to_its_end() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("simulated time: 4.0000e-1 s"), "{stdout}");
     assert!(
-        stdout.contains("momentum: start") && stdout.contains("energy"),
+        stdout.contains("momentum: start") && stdout.contains("angular about the origin"),
         "{stdout}"
     );
+    // The energies at the start and the end, and their change, which is the difference of the
+    // printed totals (to the printed digits).
+    let total = |prefix: &str| -> f64 {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(prefix))
+            .expect(prefix);
+        assert!(
+            line.contains("kinetic") && line.contains("gravitational"),
+            "{line}"
+        );
+        line.rsplit("= ").next().unwrap().trim().parse().unwrap()
+    };
+    let (start, end) = (total("energy at the start:"), total("energy at the end:"));
+    let change: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("energy change "))
+        .and_then(|l| l.split(':').next())
+        .expect("an energy change line")
+        .parse()
+        .unwrap();
+    assert!(
+        (change - (end - start)).abs() <= 1e-4 * start.abs(),
+        "{stdout}"
+    );
+    assert!(change <= 0.0 && end > 0.0, "{stdout}");
     assert!(stdout.contains("41 frames"), "{stdout}");
     let pvd = std::fs::read_to_string(out.join("bar.pvd")).unwrap();
     assert_eq!(pvd.matches("<DataSet").count(), 41);

@@ -31,7 +31,11 @@ impl Values {
     fn write_ascii(&self, out: &mut String, components: usize) {
         let mut put = |i: usize, v: &dyn std::fmt::Display| {
             let _ = write!(out, "{v}");
-            out.push(if (i + 1).is_multiple_of(components) { '\n' } else { ' ' });
+            out.push(if (i + 1).is_multiple_of(components) {
+                '\n'
+            } else {
+                ' '
+            });
         };
         match self {
             // `{:e}`: the shortest decimal that reads back to the same value.

@@ -50,6 +50,42 @@ where
     }
 }
 
+/// The energies of the particles at one instant (per unit thickness in 2D).
+///
+/// What they do not hold is what the run dissipated or was given: plastic work and damage,
+/// friction and impacts at walls, contact between bodies, the numerical dissipation of the
+/// transfer (PIC above all) and of the time integration, and the work of a body-force callback
+/// (a potential is known for gravity only). The change of [`Energies::total`] over a run is their
+/// sum.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Energies {
+    /// `½ Σ m_p |v_p|²`.
+    pub kinetic: f64,
+    /// `Σ V0_p W(F_p)`: the stored (elastic) energy of every material.
+    pub stored: f64,
+    /// `−Σ m_p g·x_p`: the potential of today's gravity `g`, zero at the coordinates' origin.
+    pub gravitational: f64,
+}
+
+impl Energies {
+    /// Kinetic + stored + gravitational.
+    pub fn total(&self) -> f64 {
+        self.kinetic + self.stored + self.gravitational
+    }
+}
+
+/// The particles' momenta at one instant (per unit thickness in 2D).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Momenta<const D: usize> {
+    /// `Σ m_p v_p`.
+    pub linear: Vector<D>,
+    /// `Σ m_p x_p × v_p` about the origin, as a 3D vector (in 2D only its third component is
+    /// not zero). Under APIC the particles' affine velocities carry angular momentum of their
+    /// own (Jiang et al. 2015), which this sum leaves out: it is conserved exactly only with
+    /// that part added.
+    pub angular: nalgebra::Vector3<f64>,
+}
+
 /// An explicit MPM simulation in `D` dimensions (2 or 3).
 pub struct Sim<const D: usize> {
     pub(crate) grid: Grid<D>,
@@ -544,6 +580,41 @@ impl<const D: usize> Sim<D> {
                     * self.materials[ps.material[p] as usize].stored_energy(&f, ps.history.get(p))
             })
             .sum()
+    }
+
+    /// The energies of the particles now ([`Energies`]; per unit thickness in 2D), summed in
+    /// storage order.
+    pub fn energies(&self) -> Energies {
+        let ps = &self.particles;
+        let g = self.options.gravity;
+        Energies {
+            kinetic: ps.kinetic_energy(),
+            stored: self.strain_energy(),
+            gravitational: -ps
+                .mass
+                .iter()
+                .zip(&ps.position)
+                .map(|(m, x)| m * g.dot(x))
+                .sum::<f64>(),
+        }
+    }
+
+    /// The particles' total linear momentum `Σ m_p v_p` and angular momentum about the origin
+    /// `Σ m_p x_p × v_p` ([`Momenta`]; per unit thickness in 2D).
+    pub fn momenta(&self) -> Momenta<D> {
+        let ps = &self.particles;
+        let embed =
+            |v: &Vector<D>| nalgebra::Vector3::from_fn(|k, _| if k < D { v[k] } else { 0.0 });
+        Momenta {
+            linear: ps.momentum(),
+            angular: ps
+                .mass
+                .iter()
+                .zip(&ps.position)
+                .zip(&ps.velocity)
+                .map(|((m, x), v)| *m * embed(x).cross(&embed(v)))
+                .sum(),
+        }
     }
 
     /// Values of `field` for every particle, particle-major, in id order (the order they were

@@ -54,15 +54,17 @@ fn sim2d(stepped: bool) -> *mut RkmpmSim {
 }
 
 fn positions(sim: *const RkmpmSim) -> Vec<f64> {
+    field(sim, RKMPM_FIELD_POSITION)
+}
+
+/// The values of `f` for every particle, in id order.
+fn field(sim: *const RkmpmSim, f: RkmpmField) -> Vec<f64> {
     let mut n = 0;
     unsafe {
-        assert_eq!(
-            rkmpm_sim_field_len(sim, RKMPM_FIELD_POSITION, &mut n),
-            RKMPM_OK
-        );
+        assert_eq!(rkmpm_sim_field_len(sim, f, &mut n), RKMPM_OK);
         let mut out = vec![0.0; n];
         assert_eq!(
-            rkmpm_sim_get_particles(sim, RKMPM_FIELD_POSITION, out.as_mut_ptr(), n),
+            rkmpm_sim_get_particles(sim, f, out.as_mut_ptr(), n),
             RKMPM_OK
         );
         out
@@ -302,6 +304,30 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         // 11: a file that cannot be written.
         let path = c"/nonexistent-dir/x.vtu";
         assert_eq!(rkmpm_sim_write_vtk(sim, path.as_ptr()), RKMPM_ERR_IO);
+        // Energies and momenta: the sums over the particles' masses and velocities.
+        let (mass, v) = (
+            field(sim, RKMPM_FIELD_MASS),
+            field(sim, RKMPM_FIELD_VELOCITY),
+        );
+        let mut e = RkmpmEnergies::default();
+        assert_eq!(rkmpm_sim_energies(sim, &mut e), RKMPM_OK);
+        let kinetic: f64 = (0..mass.len())
+            .map(|p| 0.5 * mass[p] * (v[2 * p].powi(2) + v[2 * p + 1].powi(2)))
+            .sum();
+        assert!(
+            (e.kinetic - kinetic).abs() <= 1e-13 * kinetic,
+            "{e:?} {kinetic}"
+        );
+        let mut momenta = RkmpmMomenta::default();
+        assert_eq!(rkmpm_sim_momenta(sim, &mut momenta), RKMPM_OK);
+        let px: f64 = (0..mass.len()).map(|p| mass[p] * v[2 * p]).sum();
+        assert!((momenta.linear[0] - px).abs() <= 1e-13 * px.abs().max(kinetic.sqrt()));
+        assert_eq!(momenta.linear[2], 0.0);
+        assert_eq!(rkmpm_sim_energies(sim, null_mut()), RKMPM_ERR_NULL_POINTER);
+        assert_eq!(
+            rkmpm_sim_momenta(null(), &mut momenta),
+            RKMPM_ERR_NULL_POINTER
+        );
         // The VTK format: binary by default, ASCII on request, an unknown one refused.
         let file =
             std::env::temp_dir().join(format!("rkmpm-capi-format-{}.vtu", std::process::id()));
