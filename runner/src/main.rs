@@ -92,6 +92,10 @@ struct RunArgs {
     /// deformation_gradient, plastic_strain, damage, material); `none` writes no picture.
     #[arg(long, value_name = "FIELD")]
     png: Option<String>,
+    /// Overrides the scene's run.section: a 3D picture shows the particles about the plane
+    /// y = SECTION (m); default the middle of the bodies.
+    #[arg(long, value_name = "Y")]
+    section: Option<f64>,
     /// Worker threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
@@ -192,6 +196,26 @@ fn validate(scene: &Scene) -> Result<(SceneSim, Option<(Scene, SceneSim)>), Stri
         Ok(sim)
     };
     let sim = checked(scene, "")?;
+    if let Some(y) = scene.run.section {
+        match &sim {
+            SceneSim::D2(_) => {
+                return Err(
+                    "run.section (the plane of a 3D picture) is for 3D scenes; a 2D \
+                            picture shows every particle"
+                        .into(),
+                )
+            }
+            SceneSim::D3(m) => {
+                let (lo, hi) = (m.grid().origin[1], m.grid().upper()[1]);
+                if !(lo..=hi).contains(&y) {
+                    return Err(format!(
+                        "run.section = {y:e}: the plane y = {y:e} m lies outside the grid \
+                         (y from {lo:e} to {hi:e} m)"
+                    ));
+                }
+            }
+        }
+    }
     // The comparison run, if the scene has one, writes no frames: its picture is the point.
     let other = scene
         .comparison()
@@ -253,6 +277,9 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(p) = &args.png {
         scene.run.png = (p != "none").then(|| p.clone());
     }
+    if args.section.is_some() {
+        scene.run.section = args.section;
+    }
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -298,7 +325,7 @@ fn run_scenes<const D: usize>(
         if let Some(o) = &other {
             runs.push((&**o, method(o)));
         }
-        rkmpm_runner::snapshot::write_panels(&runs, field, &scene.title, &path)?;
+        rkmpm_runner::snapshot::write_panels(&runs, field, &scene.title, &path, scene.run.section)?;
         println!("picture: {} (coloured by {field})", path.display());
     }
     Ok(())

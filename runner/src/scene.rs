@@ -294,6 +294,9 @@ pub struct RunSpec {
     /// At the end, a PNG of the particles coloured by this field (`<output>.png`).
     #[serde(default)]
     pub png: Option<String>,
+    /// 3D: the picture shows the section `y = section` (m); default the middle of the bodies.
+    #[serde(default)]
+    pub section: Option<f64>,
 }
 
 fn default_output() -> String {

@@ -1,6 +1,8 @@
 //! A PNG picture of the particles, coloured by a chosen field: the first horizontal axis against
 //! the last (x–y in 2D, x–z in 3D), each particle a dot, with a colour bar that names the field,
-//! its unit and its range.
+//! its unit and its range. In 3D the picture is a section: the particles of one layer about a
+//! plane `y = const`, as a cut through the body shows it (all of them projected onto the x–z
+//! plane would draw the body's outline and hide its inside).
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -96,17 +98,71 @@ fn colour(t: f64) -> RGBColor {
     )
 }
 
+/// The section a 3D picture shows: the plane `y = at` and the particles within half a particle
+/// spacing of it (the spacing `∛(mean volume)` of all runs' particles), one layer of an
+/// undeformed lattice (two where the plane falls half-way between layers). `at` defaults to the
+/// middle of the particles' extent along y.
+pub struct Section {
+    pub at: f64,
+    pub half_width: f64,
+}
+
+impl Section {
+    pub fn of<const D: usize>(runs: &[&Sim<D>], at: Option<f64>) -> Self {
+        let (mut lo, mut hi, mut volume, mut count) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0);
+        for sim in runs {
+            let ps = sim.particles();
+            for p in 0..ps.len() {
+                lo = lo.min(ps.position[p][1]);
+                hi = hi.max(ps.position[p][1]);
+                volume +=
+                    ps.reference_volume[p] * rkmpm::determinant(&ps.deformation_gradient[p]).abs();
+                count += 1;
+            }
+        }
+        let spacing = (volume / count.max(1) as f64).cbrt();
+        Section {
+            at: at.unwrap_or(0.5 * (lo + hi)),
+            half_width: 0.5 * spacing * (1.0 + 1e-9),
+        }
+    }
+
+    /// Whether a particle at `x` is drawn.
+    pub fn holds<const D: usize>(&self, x: &rkmpm::Vector<D>) -> bool {
+        D == 2 || (x[1] - self.at).abs() <= self.half_width
+    }
+}
+
 /// Writes the pictures of several runs of one scene side by side, each under its label, on one
-/// colour scale and the same axes, so that their fields compare at a glance.
+/// colour scale and the same axes, so that their fields compare at a glance. In 3D only the
+/// particles of the section `y = section` are drawn ([`Section`]; the middle of the bodies by
+/// default), and the colour scale is theirs.
 pub fn write_panels<const D: usize>(
     runs: &[(&Sim<D>, String)],
     field: &str,
     title: &str,
     path: &Path,
+    section: Option<f64>,
 ) -> Result<(), String> {
+    let sims: Vec<&Sim<D>> = runs.iter().map(|(s, _)| *s).collect();
+    let cut = Section::of(&sims, section);
+    // Per run: the positions and values of the particles drawn.
     let mut fields = Vec::with_capacity(runs.len());
+    let mut shown = Vec::with_capacity(runs.len());
     for (sim, _) in runs {
-        fields.push(values(*sim, field)?);
+        let (v, label) = values(*sim, field)?;
+        let x = &sim.particles().position;
+        let keep: Vec<usize> = (0..x.len()).filter(|&p| cut.holds(&x[p])).collect();
+        if keep.is_empty() && !x.is_empty() {
+            let (lo, hi) = extremes(&x.iter().map(|p| p[1]).collect::<Vec<_>>());
+            return Err(format!(
+                "the picture's section y = {:e} m holds no particle (within {:.3e} m); the bodies \
+                 span y from {lo:e} to {hi:e} m: choose a section there (run.section, --section)",
+                cut.at, cut.half_width
+            ));
+        }
+        fields.push((keep.iter().map(|&p| v[p]).collect::<Vec<f64>>(), label));
+        shown.push(keep.iter().map(|&p| x[p]).collect::<Vec<_>>());
     }
     let label = fields.first().map(|f| f.1.clone()).unwrap_or_default();
     let fail = |e: Box<dyn std::error::Error>| format!("writing {}: {e}", path.display());
@@ -159,15 +215,23 @@ pub fn write_panels<const D: usize>(
     } else {
         (root, Some(format!("{title}, t = {time:.4e} s")))
     };
+    let section_note = if D == 3 {
+        format!(", section y = {:.4} m (±{:.2e} m)", cut.at, cut.half_width)
+    } else {
+        String::new()
+    };
     let axes = ["x", "y", "z"];
     let areas = root.split_evenly((1, runs.len().max(1)));
-    for ((area, (sim, name)), (v, _)) in areas.iter().zip(runs).zip(&fields) {
+    for (((area, (sim, name)), (v, _)), x) in areas.iter().zip(runs).zip(&fields).zip(&shown) {
         let mut chart = ChartBuilder::on(area)
             .caption(
-                caption.clone().unwrap_or_else(|| {
-                    let (l, h) = extremes(v);
-                    format!("{name}: {l:.3e} to {h:.3e}")
-                }),
+                caption.clone().map_or_else(
+                    || {
+                        let (l, h) = extremes(v);
+                        format!("{name}: {l:.3e} to {h:.3e}{section_note}")
+                    },
+                    |c| format!("{c}{section_note}"),
+                ),
                 ("sans-serif", 16),
             )
             .margin(10)
@@ -182,7 +246,6 @@ pub fn write_panels<const D: usize>(
             .draw()
             .map_err(|e| fail(Box::new(e)))?;
         let dot = ((panel as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
-        let x = &sim.particles().position;
         chart
             .draw_series(x.iter().zip(v).map(|(p, &c)| {
                 Circle::new(
@@ -288,7 +351,41 @@ where
 
 #[cfg(test)]
 mod tests {
-    use super::ColourScale;
+    use super::{ColourScale, Section};
+    use rkmpm::{Material, Sim, Vector};
+
+    /// A 3D section holds one layer of a lattice about its plane (two where the plane falls
+    /// half-way between layers, as the default middle does for an even count), a 2D picture
+    /// every particle.
+    #[test]
+    fn a_section_holds_the_layers_at_its_plane() {
+        let mut sim = Sim::<3>::new([0.0; 3], [8; 3], 0.125).unwrap();
+        let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+        let s = 0.0625;
+        let x: Vec<Vector<3>> = (0..64)
+            .map(|k| {
+                Vector::<3>::new(
+                    0.25 + s * (0.5 + (k % 4) as f64),
+                    0.25 + s * (0.5 + (k / 4 % 4) as f64),
+                    0.25 + s * (0.5 + (k / 16) as f64),
+                )
+            })
+            .collect();
+        sim.add_particles(m, &x, &[s * s * s; 64], None).unwrap();
+        let count = |c: &Section| x.iter().filter(|p| c.holds(p)).count();
+        let middle = Section::of(&[&sim], None);
+        assert!((middle.at - 0.375).abs() < 1e-12 && (middle.half_width - 0.5 * s).abs() < 1e-9);
+        assert_eq!(count(&middle), 32);
+        let first = Section::of(&[&sim], Some(0.25 + 0.5 * s));
+        assert_eq!(count(&first), 16);
+        assert!(x.iter().filter(|p| first.holds(p)).all(|p| p[1] < 0.25 + s));
+        assert_eq!(count(&Section::of(&[&sim], Some(0.9))), 0);
+        let flat = Section {
+            at: 0.0,
+            half_width: 0.0,
+        };
+        assert!(flat.holds(&rkmpm::Vector::<2>::new(0.3, 0.7)));
+    }
 
     /// A body near zero with a few spikes is drawn between its percentiles; a field without a
     /// tail, and material ids, between their extremes.

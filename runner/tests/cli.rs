@@ -225,6 +225,8 @@ fn help_and_listing() {
 fn check_refuses_what_run_refuses() {
     let (ok, disks, _) = rkmpm(&["show", "disks"]);
     assert!(ok);
+    let (ok, taylor, _) = rkmpm(&["show", "taylor"]);
+    assert!(ok);
     let dir = scratch("check");
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
@@ -249,9 +251,20 @@ fn check_refuses_what_run_refuses() {
             disks.replace("png = \"pressure\"", "png = \"plastic\""),
             "png = \"plastic\": choose one of",
         ),
+        (
+            disks.replace("png = \"pressure\"", "png = \"pressure\"\nsection = 0.5"),
+            "run.section (the plane of a 3D picture) is for 3D scenes",
+        ),
+        (
+            taylor.replace("section = 0.0002", "section = 0.5"),
+            "run.section = 5e-1: the plane y = 5e-1 m lies outside the grid",
+        ),
     ];
     for (k, (text, message)) in cases.iter().enumerate() {
-        assert_ne!(text, &disks, "case {k} changed nothing");
+        assert!(
+            text != &disks && text != &taylor,
+            "case {k} changed nothing"
+        );
         let file = dir.join(format!("case{k}.toml"));
         std::fs::write(&file, text).unwrap();
         let file = file.to_str().unwrap();
