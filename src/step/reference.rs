@@ -496,12 +496,14 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
         };
         map_to_grid(sim, &stencils, &map, &mut nodes);
         // The given boundary points' tractions: `t_b |n_b a_b|` on the nodes by `Ψ_I(x_b)`.
-        for b in (0..sim.boundary.len()).filter(|_| sim.boundary.has_tractions()) {
-            let force = sim.boundary.traction[b] * sim.boundary.area_normal[b].norm();
-            let sb = stencil(sim, &sim.boundary.position[b]);
-            for (&n, &w) in sb.nodes.iter().zip(&sb.values).filter(|(_, &w)| w != 0.0) {
-                nodes.touch(n);
-                nodes.force[n] += w * force;
+        if sim.boundary.has_tractions() {
+            for b in 0..sim.boundary.len() {
+                let force = sim.boundary.traction[b] * sim.boundary.area_normal[b].norm();
+                let sb = stencil(sim, &sim.boundary.position[b]);
+                for (&n, &w) in sb.nodes.iter().zip(&sb.values).filter(|(_, &w)| w != 0.0) {
+                    nodes.touch(n);
+                    nodes.force[n] += w * force;
+                }
             }
         }
         update_grid(sim, &mut nodes, Some(dt), mass_floor);
