@@ -29,6 +29,8 @@ fn sums_of_the_particles<const D: usize>() {
         v[1] = x[0] - 0.4;
         v
     });
+    // Without gravity the potential is +0 (a summary prints 0, not −0).
+    assert_eq!(sim.energies().gravitational.to_bits(), 0.0f64.to_bits());
     let mut g = V::<D>::zeros();
     g[D - 1] = -9.81;
     sim.set_gravity(g).unwrap();

@@ -99,7 +99,8 @@ fn colour(t: f64) -> RGBColor {
 }
 
 /// The section a 3D picture shows: the plane `y = at` and the particles within half a particle
-/// spacing of it (the spacing `∛(mean volume)` of all runs' particles), one layer of an
+/// spacing of it (the spacing `∛(mean volume)` of all runs' particles; a 2D picture shows every
+/// particle), one layer of an
 /// undeformed lattice (two where the plane falls half-way between layers). `at` defaults to the
 /// middle of the particles' extent along y.
 pub struct Section {
@@ -120,7 +121,8 @@ impl Section {
                 count += 1;
             }
         }
-        let spacing = (volume / count.max(1) as f64).cbrt();
+        let mean = volume / count.max(1) as f64;
+        let spacing = if D == 2 { mean.sqrt() } else { mean.cbrt() };
         Section {
             at: at.unwrap_or(0.5 * (lo + hi)),
             half_width: 0.5 * spacing * (1.0 + 1e-9),

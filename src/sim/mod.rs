@@ -590,12 +590,13 @@ impl<const D: usize> Sim<D> {
         Energies {
             kinetic: ps.kinetic_energy(),
             stored: self.strain_energy(),
-            gravitational: -ps
-                .mass
-                .iter()
-                .zip(&ps.position)
-                .map(|(m, x)| m * g.dot(x))
-                .sum::<f64>(),
+            // `0 − Σ`, not `−Σ`: zero without gravity, not −0.
+            gravitational: 0.0
+                - ps.mass
+                    .iter()
+                    .zip(&ps.position)
+                    .map(|(m, x)| m * g.dot(x))
+                    .sum::<f64>(),
         }
     }
 
