@@ -225,6 +225,45 @@ typedef struct RkmpmEnergies {
 } RkmpmEnergies;
 
 /**
+ * Where a run's energy went since the accounting started (`rkmpm_sim_set_energy_accounting`;
+ * per unit thickness in 2D), from `rkmpm_sim_energy_balance`. The balance
+ * `kinetic + stored + gravitational = start + external_work - material_dissipation -
+ * other_dissipation` holds by the definition of `other_dissipation`.
+ */
+typedef struct RkmpmEnergyBalance {
+  /**
+   * The energies now, as `rkmpm_sim_energies` gives them.
+   */
+  double kinetic;
+  double stored;
+  double gravitational;
+  /**
+   * The total energy when the accounting started, plus what the caller gave since
+   * (particles added, a rigid body's velocity or gravity changed).
+   */
+  double start;
+  /**
+   * The work of the body-force callback and of the boundary points' tractions.
+   */
+  double external_work;
+  /**
+   * The work of the stresses, `sum V0 (P^n + P^{n+1})/2 : (F^{n+1} - F^n)` over the steps.
+   */
+  double stress_work;
+  /**
+   * The stress work less the change of the stored energy: what plasticity and damage
+   * dissipated (for an elastic material, the trapezoidal rule's error, O(dt^2) over a run).
+   */
+  double material_dissipation;
+  /**
+   * The rest: impacts and friction at walls, contact, rigid bodies driven at a given
+   * velocity, and the scheme's numerical dissipation (the transfer's and the time
+   * integration's).
+   */
+  double other_dissipation;
+} RkmpmEnergyBalance;
+
+/**
  * The particles' momenta at one instant (per unit thickness in 2D), from `rkmpm_sim_momenta`.
  */
 typedef struct RkmpmMomenta {
@@ -233,9 +272,10 @@ typedef struct RkmpmMomenta {
    */
   double linear[3];
   /**
-   * `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0). Under
-   * APIC the particles' affine velocities carry angular momentum of their own (Jiang et al.
-   * 2015), which this sum leaves out.
+   * `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0), plus,
+   * under APIC and MLS with a B-spline, the angular momentum the particles' affine velocities
+   * carry (Jiang et al. 2015), `sum m_p d eps : C_p` with `d = h^2/4` (quadratic) or `h^2/3`
+   * (cubic): the total the transfers conserve.
    */
   double angular[3];
 } RkmpmMomenta;
@@ -767,6 +807,27 @@ enum RkmpmStatus rkmpm_sim_advance(struct RkmpmSim *sim,
  * `sim` must be a live handle; `out` valid for a write.
  */
 enum RkmpmStatus rkmpm_sim_energies(const struct RkmpmSim *sim, struct RkmpmEnergies *out);
+
+/**
+ * Switches the energy accounting on (`on` = 1: from the energies now, with nothing dissipated
+ * yet; switching it on again starts it afresh) or off (`on` = 0). While it is on, every step
+ * adds its stress work and external work to a ledger (one more pass over the particles per
+ * step) that `rkmpm_sim_energy_balance` reads and checkpoints keep.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_energy_accounting(struct RkmpmSim *sim, uint32_t on);
+
+/**
+ * Writes where the energy went since the accounting started to `*out`
+ * (`RkmpmEnergyBalance`). Fails with `RKMPM_ERR_INVALID_STATE` when the accounting is off.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_energy_balance(const struct RkmpmSim *sim,
+                                          struct RkmpmEnergyBalance *out);
 
 /**
  * Writes the particles' total linear and angular momentum to `*out`.

@@ -41,6 +41,7 @@ pub mod boundary {
     #[deprecated(note = "renamed to `Wall`")]
     pub type Boundary = crate::options::Wall;
 }
+pub(crate) mod energy;
 pub mod error;
 pub mod io;
 pub mod material;

@@ -113,8 +113,21 @@ module rkmpm
       real(c_double) :: kinetic = 0, stored = 0, gravitational = 0
    end type rkmpm_energies
 
+   !> Where a run's energy went since the accounting started (struct RkmpmEnergyBalance; per
+   !> unit thickness in 2D): the energies now, the start (plus what the caller gave since), the
+   !> external work (body-force callback, tractions), the stress work, what plasticity and
+   !> damage dissipated, and the rest (walls, contact, rigid drivers, the scheme), so that
+   !> kinetic + stored + gravitational = start + external_work - material_dissipation
+   !> - other_dissipation.
+   type, bind(C), public :: rkmpm_energy_balance
+      real(c_double) :: kinetic = 0, stored = 0, gravitational = 0, start = 0
+      real(c_double) :: external_work = 0, stress_work = 0
+      real(c_double) :: material_dissipation = 0, other_dissipation = 0
+   end type rkmpm_energy_balance
+
    !> The particles' linear momentum and angular momentum about the origin (struct
-   !> RkmpmMomenta; third components 0, and in 2D only angular(3) not 0).
+   !> RkmpmMomenta; third components 0, and in 2D only angular(3) not 0), the affine
+   !> velocities' part included under APIC and MLS with a B-spline.
    type, bind(C), public :: rkmpm_momenta
       real(c_double) :: linear(3) = 0, angular(3) = 0
    end type rkmpm_momenta
@@ -206,6 +219,8 @@ module rkmpm
       procedure :: time => sim_time
       procedure :: energies => sim_energies
       procedure :: momenta => sim_momenta
+      procedure :: set_energy_accounting => sim_set_energy_accounting
+      procedure :: energy_balance => sim_energy_balance
       procedure :: step_count => sim_step_count
       procedure :: particle_count => sim_particle_count
       procedure :: field_len => sim_field_len
@@ -519,6 +534,23 @@ module rkmpm
          type(c_ptr), value :: sim
          type(rkmpm_energies), intent(out) :: out
       end function rkmpm_sim_energies
+
+      ! enum RkmpmStatus rkmpm_sim_set_energy_accounting(struct RkmpmSim *sim, uint32_t on);
+      integer(c_int) function rkmpm_sim_set_energy_accounting(sim, on) &
+            bind(C, name="rkmpm_sim_set_energy_accounting")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: on
+      end function rkmpm_sim_set_energy_accounting
+
+      ! enum RkmpmStatus rkmpm_sim_energy_balance(const struct RkmpmSim *sim,
+      !                                           struct RkmpmEnergyBalance *out);
+      integer(c_int) function rkmpm_sim_energy_balance(sim, out) &
+            bind(C, name="rkmpm_sim_energy_balance")
+         import :: c_int, c_ptr, rkmpm_energy_balance
+         type(c_ptr), value :: sim
+         type(rkmpm_energy_balance), intent(out) :: out
+      end function rkmpm_sim_energy_balance
 
       ! enum RkmpmStatus rkmpm_sim_momenta(const struct RkmpmSim *sim, struct RkmpmMomenta *out);
       integer(c_int) function rkmpm_sim_momenta(sim, out) bind(C, name="rkmpm_sim_momenta")
@@ -1213,7 +1245,6 @@ contains
       if (present(errmsg)) errmsg = text
    end subroutine sim_advance
 
-   !> The simulated time.
    !> The energies of the particles now.
    type(rkmpm_energies) function sim_energies(self, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
@@ -1225,6 +1256,30 @@ contains
       if (present(errmsg)) errmsg = text
       sim_energies = e
    end function sim_energies
+
+   !> Switches the energy accounting on (from the energies now) or off.
+   subroutine sim_set_energy_accounting(self, on, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      logical, intent(in) :: on
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      call report(rkmpm_sim_set_energy_accounting(self%h, merge(1_c_int32_t, 0_c_int32_t, on)), &
+         'set_energy_accounting', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_energy_accounting
+
+   !> Where the energy went since the accounting started (fails while it is off).
+   type(rkmpm_energy_balance) function sim_energy_balance(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      type(rkmpm_energy_balance) :: b
+      call report(rkmpm_sim_energy_balance(self%h, b), 'energy_balance', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_energy_balance = b
+   end function sim_energy_balance
 
    !> The particles' linear and angular momentum now.
    type(rkmpm_momenta) function sim_momenta(self, stat, errmsg)
@@ -1238,6 +1293,7 @@ contains
       sim_momenta = p
    end function sim_momenta
 
+   !> The simulated time.
    real(c_double) function sim_time(self, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
       integer(c_int), intent(out), optional :: stat
@@ -1329,7 +1385,6 @@ contains
       if (present(errmsg)) errmsg = text
    end subroutine sim_get_particles_2d
 
-   !> Writes the particles to one VTK .vtu file at trim(path).
    !> How the VTK files written from now on store their arrays: RKMPM_VTK_BINARY (the default)
    !> or RKMPM_VTK_ASCII.
    subroutine sim_set_vtk_format(self, format, stat, errmsg)
@@ -1342,6 +1397,7 @@ contains
       if (present(errmsg)) errmsg = text
    end subroutine sim_set_vtk_format
 
+   !> Writes the particles to one VTK .vtu file at trim(path).
    subroutine sim_write_vtk(self, path, stat, errmsg)
       class(rkmpm_sim), intent(in) :: self
       character(*), intent(in) :: path

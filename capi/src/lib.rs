@@ -1183,10 +1183,38 @@ pub struct RkmpmEnergies {
 pub struct RkmpmMomenta {
     /// `sum m_p v_p` (the third component 0 in 2D).
     pub linear: [f64; 3],
-    /// `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0). Under
-    /// APIC the particles' affine velocities carry angular momentum of their own (Jiang et al.
-    /// 2015), which this sum leaves out.
+    /// `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0), plus,
+    /// under APIC and MLS with a B-spline, the angular momentum the particles' affine velocities
+    /// carry (Jiang et al. 2015), `sum m_p d eps : C_p` with `d = h^2/4` (quadratic) or `h^2/3`
+    /// (cubic): the total the transfers conserve.
     pub angular: [f64; 3],
+}
+
+/// Where a run's energy went since the accounting started (`rkmpm_sim_set_energy_accounting`;
+/// per unit thickness in 2D), from `rkmpm_sim_energy_balance`. The balance
+/// `kinetic + stored + gravitational = start + external_work - material_dissipation -
+/// other_dissipation` holds by the definition of `other_dissipation`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RkmpmEnergyBalance {
+    /// The energies now, as `rkmpm_sim_energies` gives them.
+    pub kinetic: f64,
+    pub stored: f64,
+    pub gravitational: f64,
+    /// The total energy when the accounting started, plus what the caller gave since
+    /// (particles added, a rigid body's velocity or gravity changed).
+    pub start: f64,
+    /// The work of the body-force callback and of the boundary points' tractions.
+    pub external_work: f64,
+    /// The work of the stresses, `sum V0 (P^n + P^{n+1})/2 : (F^{n+1} - F^n)` over the steps.
+    pub stress_work: f64,
+    /// The stress work less the change of the stored energy: what plasticity and damage
+    /// dissipated (for an elastic material, the trapezoidal rule's error, O(dt^2) over a run).
+    pub material_dissipation: f64,
+    /// The rest: impacts and friction at walls, contact, rigid bodies driven at a given
+    /// velocity, and the scheme's numerical dissipation (the transfer's and the time
+    /// integration's).
+    pub other_dissipation: f64,
 }
 
 /// Writes the kinetic, stored and gravitational energies of the particles to `*out`.
@@ -1207,6 +1235,57 @@ pub unsafe extern "C" fn rkmpm_sim_energies(
             kinetic: e.kinetic,
             stored: e.stored,
             gravitational: e.gravitational,
+        };
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out", out, value) }
+    })
+}
+
+/// Switches the energy accounting on (`on` = 1: from the energies now, with nothing dissipated
+/// yet; switching it on again starts it afresh) or off (`on` = 0). While it is on, every step
+/// adds its stress work and external work to a ledger (one more pass over the particles per
+/// step) that `rkmpm_sim_energy_balance` reads and checkpoints keep.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_energy_accounting(
+    sim: *mut RkmpmSim,
+    on: u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_energy_accounting", || {
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        let on = flag("on", on)?;
+        with_sim!(&mut s.sim, m => m.set_energy_accounting(on));
+        Ok(())
+    })
+}
+
+/// Writes where the energy went since the accounting started to `*out`
+/// (`RkmpmEnergyBalance`). Fails with `RKMPM_ERR_INVALID_STATE` when the accounting is off.
+///
+/// # Safety
+/// `sim` must be a live handle; `out` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_energy_balance(
+    sim: *const RkmpmSim,
+    out: *mut RkmpmEnergyBalance,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_energy_balance", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        check_ptr("out", out)?;
+        let b = with_sim!(&s.sim, m => m.energy_balance())?;
+        let value = RkmpmEnergyBalance {
+            kinetic: b.now.kinetic,
+            stored: b.now.stored,
+            gravitational: b.now.gravitational,
+            start: b.start,
+            external_work: b.external_work,
+            stress_work: b.stress_work,
+            material_dissipation: b.material_dissipation,
+            other_dissipation: b.other_dissipation,
         };
         // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
         unsafe { write_out("out", out, value) }

@@ -845,6 +845,44 @@ static void lifetime_rows(void) {
     EXPECT(raw[1] == 0 && raw[9] == 0, "wrote through a misaligned out pointer");
     drop(&f);
   }
+  ROW("set_energy_accounting.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_energy_accounting(NULL, 1));
+  }
+  ROW("set_energy_accounting.bad_flag", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = stepped_block(2);
+    RkmpmEnergyBalance b;
+    CALL(f.sim, rkmpm_sim_set_energy_accounting(f.sim, 2));
+    CALL(f.sim, rkmpm_sim_set_energy_accounting(f.sim, UINT32_MAX));
+    EXPECT(rkmpm_sim_energy_balance(f.sim, &b) == RKMPM_ERR_INVALID_STATE,
+           "a refused flag switched the accounting on");
+    drop(&f);
+  }
+  ROW("energy_balance.null_sim", RKMPM_ERR_NULL_POINTER) {
+    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
+    CALL(NULL, rkmpm_sim_energy_balance(NULL, &b));
+    EXPECT(b.kinetic == 77.0 && b.other_dissipation == 77.0, "wrote the output after a failure");
+  }
+  ROW("energy_balance.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = stepped_block(2);
+    EXPECT(rkmpm_sim_set_energy_accounting(f.sim, 1) == RKMPM_OK, "accounting refused");
+    CALL(f.sim, rkmpm_sim_energy_balance(f.sim, NULL));
+    drop(&f);
+  }
+  ROW("energy_balance.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = stepped_block(2);
+    EXPECT(rkmpm_sim_set_energy_accounting(f.sim, 1) == RKMPM_OK, "accounting refused");
+    memset(raw, 0, sizeof raw);
+    CALL(f.sim, rkmpm_sim_energy_balance(f.sim, misaligned(raw)));
+    EXPECT(raw[1] == 0 && raw[9] == 0, "wrote through a misaligned out pointer");
+    drop(&f);
+  }
+  ROW("energy_balance.accounting_off", RKMPM_ERR_INVALID_STATE) {
+    Fixture f = stepped_block(3);
+    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
+    CALL(f.sim, rkmpm_sim_energy_balance(f.sim, &b));
+    EXPECT(b.kinetic == 77.0 && b.start == 77.0, "wrote the output after a failure");
+    drop(&f);
+  }
   ROW("momenta.null_sim", RKMPM_ERR_NULL_POINTER) {
     RkmpmMomenta p = {{77.0, 77.0, 77.0}, {77.0, 77.0, 77.0}};
     CALL(NULL, rkmpm_sim_momenta(NULL, &p));

@@ -388,6 +388,8 @@ fn run_scene<const D: usize>(
         ProgressBar::hidden()
     };
     let (p0, e0) = (sim.momenta(), sim.energies());
+    // The summary tells where the energy went (one more pass over the particles per step).
+    sim.set_energy_accounting(true);
     let n = sim.particles().len() as f64;
     let start = Instant::now();
     let frame = |series: &mut VtkSeries, sim: &Sim<D>| {
@@ -471,8 +473,7 @@ fn summary<const D: usize>(
         ps.len() as f64 * sim.steps() as f64 / wall.max(1e-9)
     );
     println!(
-        "momentum: start ({}), end ({}); angular about the origin {} -> {} (without APIC's \
-         affine part)",
+        "momentum: start ({}), end ({}); angular about the origin {} -> {}",
         fmt(p0.linear.as_slice()),
         fmt(p1.linear.as_slice()),
         angular(&p0),
@@ -489,11 +490,27 @@ fn summary<const D: usize>(
     };
     println!("energy at the start: {}", line(&e0));
     println!("energy at the end:   {}", line(&e1));
-    println!(
-        "energy change {:.4e}: what plasticity, damage, walls, contact and the scheme (transfer \
-         and time integration) dissipated",
-        e1.total() - e0.total()
-    );
+    match sim.energy_balance() {
+        Ok(b) => {
+            println!(
+                "energy change {:.4e} = external work {:.4e} (body force, tractions) \
+                 - plasticity and damage {:.4e}",
+                e1.total() - e0.total(),
+                b.external_work,
+                b.material_dissipation
+            );
+            println!(
+                "                     - walls, contact and the scheme (transfer, time \
+                 integration) {:.4e}",
+                b.other_dissipation
+            );
+        }
+        Err(e) => println!(
+            "energy change {:.4e} ({})",
+            e1.total() - e0.total(),
+            e.message
+        ),
+    }
     let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     if !ps.history.is_empty() {
         let plastic: Vec<f64> = ps.history.iter().map(|s| s.plastic_strain).collect();

@@ -34,7 +34,9 @@ use std::path::Path;
 const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// Format version written by this build. Version 2 adds the particles' ids (their storage is
 /// sorted by grid block); version 1 files, written before, load with the particles in id order.
-pub const CHECKPOINT_VERSION: u32 = 2;
+/// Version 3 adds the energy ledger (`Sim::set_energy_accounting`) after the step count;
+/// older files load with the accounting off.
+pub const CHECKPOINT_VERSION: u32 = 3;
 
 fn corrupt(what: impl Into<String>) -> Error {
     Error::new(ErrorKind::CorruptFile, what)
@@ -449,7 +451,8 @@ impl<const D: usize> Sim<D> {
         self.encode(CHECKPOINT_VERSION)
     }
 
-    /// The checkpoint in format `version` (1 or 2; tests write version 1 to read it back).
+    /// The checkpoint in format `version` (1 to 3; tests write older versions to read them
+    /// back).
     fn encode(&self, version: u32) -> Vec<u8> {
         let mut w = Writer::default();
         w.f64s(self.grid.origin.iter());
@@ -469,6 +472,11 @@ impl<const D: usize> Sim<D> {
         w.vectors(&b.traction);
         w.f64(self.time);
         w.u64(self.steps);
+        if version >= 3 {
+            let e = &self.energy;
+            w.u32(u32::from(e.on));
+            w.f64s([e.start, e.stored_start, e.stress_work, e.external_work].iter());
+        }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
         out.extend_from_slice(MAGIC);
@@ -586,6 +594,20 @@ impl<const D: usize> Sim<D> {
         }
         sim.time = r.f64()?;
         sim.steps = r.u64()?;
+        if version >= 3 {
+            let on = match r.u32()? {
+                0 => false,
+                1 => true,
+                k => return Err(corrupt(format!("energy accounting flag {k}"))),
+            };
+            sim.energy = crate::energy::EnergyLedger {
+                on,
+                start: r.f64()?,
+                stored_start: r.f64()?,
+                stress_work: r.f64()?,
+                external_work: r.f64()?,
+            };
+        }
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
         }
@@ -674,6 +696,31 @@ mod tests {
         assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
         let copy = Sim::<2>::from_checkpoint_bytes(&bytes).unwrap();
         assert_eq!(copy.particles(), sim.particles());
+    }
+
+    /// Format 3 keeps the energy ledger; a format-2 file loads with the accounting off.
+    #[test]
+    fn the_energy_ledger_is_kept_from_format_3() {
+        let mut sim = block();
+        sim.set_energy_accounting(true);
+        let dt = sim.stable_dt(0.3).unwrap();
+        sim.step(dt).unwrap();
+        assert!(sim.energy.stress_work != 0.0);
+        let copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert_eq!(copy.energy, sim.energy);
+        let old = Sim::<2>::from_checkpoint_bytes(&sim.encode(2)).unwrap();
+        assert_eq!(old.energy, crate::energy::EnergyLedger::default());
+        assert_eq!(old.particles(), sim.particles());
+        // A flag other than 0 or 1 is refused.
+        let mut bytes = sim.checkpoint_bytes();
+        let flag = bytes.len() - 4 - 4 * 8 - 4;
+        bytes[flag] = 2;
+        let n = bytes.len();
+        let crc = crc32fast::hash(&bytes[24..n - 4]).to_le_bytes();
+        bytes[n - 4..].copy_from_slice(&crc);
+        let e = Sim::<2>::from_checkpoint_bytes(&bytes).err().unwrap();
+        assert_eq!(e.kind, ErrorKind::CorruptFile, "{e}");
+        assert!(e.message.contains("energy accounting flag 2"), "{e}");
     }
 
     #[test]

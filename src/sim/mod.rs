@@ -5,6 +5,7 @@ mod timestep;
 
 pub use timestep::Progress;
 
+use crate::energy::EnergyLedger;
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
 use crate::integration::{BoundaryPoints, VcCorrection};
@@ -74,15 +75,47 @@ impl Energies {
     }
 }
 
+/// Where a run's energy went, since the accounting started ([`Sim::set_energy_accounting`];
+/// per unit thickness in 2D). The balance
+///
+/// ```text
+/// now.total() = start + external_work − material_dissipation − other_dissipation
+/// ```
+///
+/// holds by the definition of `other_dissipation`, which is what no term measured on its own
+/// holds: impacts and friction at walls, contact between bodies, the work of rigid bodies driven
+/// at a given velocity, and the scheme's numerical dissipation (the transfer's, PIC above all,
+/// and the time integration's; for a body in free fall `½ M |g|² Δt²` per step).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EnergyBalance {
+    /// The energies now.
+    pub now: Energies,
+    /// The total energy when the accounting started, plus what the caller gave since:
+    /// particles added, a rigid body's velocity or gravity changed.
+    pub start: f64,
+    /// The work of the body-force callback and of the boundary points' tractions.
+    pub external_work: f64,
+    /// The work of the stresses, `Σ V0 ½(Pⁿ + Pⁿ⁺¹) : (Fⁿ⁺¹ − Fⁿ)` over the steps.
+    pub stress_work: f64,
+    /// The stress work less the change of the stored energy: what plasticity and damage
+    /// dissipated (for an elastic material, the trapezoidal rule's error, `O(Δt²)` over a run).
+    pub material_dissipation: f64,
+    /// The rest: walls, contact, rigid drivers and the scheme (see the type's documentation).
+    pub other_dissipation: f64,
+}
+
 /// The particles' momenta at one instant (per unit thickness in 2D).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Momenta<const D: usize> {
     /// `Σ m_p v_p`.
     pub linear: Vector<D>,
     /// `Σ m_p x_p × v_p` about the origin, as a 3D vector (in 2D only its third component is
-    /// not zero). Under APIC the particles' affine velocities carry angular momentum of their
-    /// own (Jiang et al. 2015), which this sum leaves out: it is conserved exactly only with
-    /// that part added.
+    /// not zero), plus, under APIC and MLS with a B-spline, the angular momentum the particles'
+    /// affine velocities carry (Jiang et al. 2015): `Σ m_p d ε : C_p` with the weights'
+    /// inertia `D_p = d I` (`d = h²/4` quadratic, `h²/3` cubic), that is
+    /// `m d (C_zy − C_yz, C_xz − C_zx, C_yx − C_xy)`. That total is what the transfers
+    /// conserve. With shape functions whose inertia is not a multiple of the identity (linear
+    /// hats, RK) `C_p` is the velocity gradient and its part is left out.
     pub angular: nalgebra::Vector3<f64>,
 }
 
@@ -103,6 +136,8 @@ pub struct Sim<const D: usize> {
     pub(crate) steps: u64,
     pub(crate) work: Workspace<D>,
     pub(crate) fast_paths: FastPaths,
+    /// What the steps did to the energy, when the accounting is on.
+    pub(crate) energy: EnergyLedger,
 }
 
 impl<const D: usize> Sim<D> {
@@ -130,6 +165,7 @@ impl<const D: usize> Sim<D> {
             steps: 0,
             work: Workspace::default(),
             fast_paths: FastPaths::default(),
+            energy: EnergyLedger::default(),
         })
     }
 
@@ -259,6 +295,18 @@ impl<const D: usize> Sim<D> {
         for a in 0..D {
             check_finite("gravity", g[a])?;
         }
+        if self.energy.on {
+            // The potential changes with `g`; the ledger counts the jump as given.
+            let ps = &self.particles;
+            let dg = g - self.options.gravity;
+            let jump: f64 = ps
+                .mass
+                .iter()
+                .zip(&ps.position)
+                .map(|(m, x)| m * dg.dot(x))
+                .sum();
+            self.energy.start -= jump;
+        }
         self.options.gravity = g;
         Ok(())
     }
@@ -377,13 +425,19 @@ impl<const D: usize> Sim<D> {
                 // Its particles move with it from now on, and the stable step sees their speed.
                 let v = Vector::<D>::from_fn(|i, _| velocity[i]);
                 let ps = &mut self.particles;
-                for (vp, _) in ps
+                let mut given = 0.0;
+                for ((vp, m), _) in ps
                     .velocity
                     .iter_mut()
+                    .zip(&ps.mass)
                     .zip(&ps.material)
-                    .filter(|(_, &m)| m == material)
+                    .filter(|(_, &b)| b == material)
                 {
+                    given += 0.5 * m * (v.norm_squared() - vp.norm_squared());
                     *vp = v;
+                }
+                if self.energy.on {
+                    self.energy.start += given;
                 }
                 self.work.signal_speed = None;
                 Ok(())
@@ -474,6 +528,18 @@ impl<const D: usize> Sim<D> {
                 first_id + n,
                 u32::MAX
             )));
+        }
+        if self.energy.on {
+            // The new particles' kinetic and gravitational energy (they are unstrained).
+            let g = self.options.gravity;
+            let given: f64 = (0..n)
+                .map(|p| {
+                    let m = rho * volumes[p];
+                    let v = velocities.map_or(0.0, |v| v[p].norm_squared());
+                    0.5 * m * v - m * g.dot(&positions[p])
+                })
+                .sum();
+            self.energy.start += given;
         }
         let apic = self.options.transfer.is_affine();
         ps.id.extend(first_id as u32..(first_id + n) as u32);
@@ -600,21 +666,84 @@ impl<const D: usize> Sim<D> {
         }
     }
 
-    /// The particles' total linear momentum `Σ m_p v_p` and angular momentum about the origin
-    /// `Σ m_p x_p × v_p` ([`Momenta`]; per unit thickness in 2D).
+    /// Switches the energy accounting on (from the energies now, with nothing dissipated yet;
+    /// switching it on again starts it afresh) or off. While it is on, every step adds its
+    /// stress work and external work to the ledger that [`Sim::energy_balance`] reads (one more
+    /// pass over the particles per step) and checkpoints keep it.
+    pub fn set_energy_accounting(&mut self, on: bool) {
+        self.energy = EnergyLedger::default();
+        if on {
+            let e = self.energies();
+            self.energy = EnergyLedger {
+                on: true,
+                start: e.total(),
+                stored_start: e.stored,
+                ..EnergyLedger::default()
+            };
+        }
+    }
+
+    /// Whether the energy accounting is on.
+    pub fn energy_accounting(&self) -> bool {
+        self.energy.on
+    }
+
+    /// Where the energy went since the accounting started ([`EnergyBalance`]). Fails with
+    /// `InvalidState` when the accounting is off.
+    pub fn energy_balance(&self) -> Result<EnergyBalance> {
+        let ledger = &self.energy;
+        if !ledger.on {
+            return Err(Error::state(
+                "the energy accounting is off; switch it on (set_energy_accounting) before \
+                 the steps it should account for",
+            ));
+        }
+        let now = self.energies();
+        let material_dissipation = ledger.stress_work - (now.stored - ledger.stored_start);
+        Ok(EnergyBalance {
+            now,
+            start: ledger.start,
+            external_work: ledger.external_work,
+            stress_work: ledger.stress_work,
+            material_dissipation,
+            other_dissipation: ledger.start + ledger.external_work
+                - material_dissipation
+                - now.total(),
+        })
+    }
+
+    /// The particles' total linear momentum `Σ m_p v_p` and angular momentum about the origin,
+    /// `Σ m_p x_p × v_p` and the affine velocities' part under APIC and MLS ([`Momenta`]; per
+    /// unit thickness in 2D).
     pub fn momenta(&self) -> Momenta<D> {
         let ps = &self.particles;
         let embed =
             |v: &Vector<D>| nalgebra::Vector3::from_fn(|k, _| if k < D { v[k] } else { 0.0 });
+        let inertia = (self.options.transfer.is_affine() && ps.affine.len() == ps.len())
+            .then(|| self.shape.apic_inertia(self.grid.cell_size))
+            .flatten();
+        // `ε : C` as a 3D vector: `(C_zy − C_yz, C_xz − C_zx, C_yx − C_xy)`.
+        let spin = |c: &Matrix<D>| {
+            let at = |i: usize, j: usize| if i < D && j < D { c[(i, j)] } else { 0.0 };
+            nalgebra::Vector3::new(
+                at(2, 1) - at(1, 2),
+                at(0, 2) - at(2, 0),
+                at(1, 0) - at(0, 1),
+            )
+        };
+        let angular = (0..ps.len())
+            .map(|p| {
+                let (m, x, v) = (ps.mass[p], &ps.position[p], &ps.velocity[p]);
+                let own = m * embed(x).cross(&embed(v));
+                match inertia {
+                    Some(d) => own + (m * d) * spin(&ps.affine[p]),
+                    None => own,
+                }
+            })
+            .sum();
         Momenta {
             linear: ps.momentum(),
-            angular: ps
-                .mass
-                .iter()
-                .zip(&ps.position)
-                .zip(&ps.velocity)
-                .map(|((m, x), v)| *m * embed(x).cross(&embed(v)))
-                .sum(),
+            angular,
         }
     }
 

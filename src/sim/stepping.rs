@@ -78,6 +78,7 @@ impl<const D: usize> Sim<D> {
             surface: &mut self.surface,
             vc: &mut self.vc,
             work: &mut self.work,
+            energy: &mut self.energy,
         }
     }
 

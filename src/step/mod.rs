@@ -58,6 +58,7 @@ pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces, ToGrid};
 
 use crate::cpu::Lanes;
+use crate::energy::{traction_work, EnergyLedger, StepStates};
 use crate::error::Result;
 use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
@@ -185,6 +186,8 @@ pub(crate) struct Step<'a, const D: usize> {
     pub surface: &'a mut BoundaryPoints<D>,
     pub vc: &'a mut Option<VcCorrection<D>>,
     pub work: &'a mut Workspace<D>,
+    /// The energy ledger, which the commit adds the step's work to when it is on.
+    pub energy: &'a mut EnergyLedger,
 }
 
 impl<const D: usize> Step<'_, D> {
@@ -374,6 +377,9 @@ impl<const D: usize> Step<'_, D> {
     /// Swaps the checked new state into the particles (the old one becomes the next step's
     /// storage) and copies the new history of history particles.
     fn commit(&mut self) {
+        if self.energy.on {
+            self.add_work_to_ledger();
+        }
         let ps = &mut self.particles;
         let new = &mut self.work.new_state;
         std::mem::swap(&mut ps.position, &mut new.position);
@@ -407,6 +413,35 @@ impl<const D: usize> Step<'_, D> {
             b.deformation_gradient[k] = u.deformation_gradient;
             b.area_normal[k] = u.area_normal;
         }
+    }
+}
+
+impl<const D: usize> Step<'_, D> {
+    /// Adds the step's stress work and external work to the energy ledger ([`crate::energy`]),
+    /// from the old state (the particles) and the checked new one (the workspace).
+    fn add_work_to_ledger(&mut self) {
+        let (ps, work) = (&*self.particles, &*self.work);
+        let new = &work.new_state;
+        let states = StepStates {
+            source: (work.reorder == Reorder::InGather).then_some(&work.bins.order[..]),
+            reference_volume: &ps.reference_volume,
+            mass: &ps.mass,
+            old_position: &ps.position,
+            new_position: &new.position,
+            old_deformation_gradient: &ps.deformation_gradient,
+            new_deformation_gradient: &new.deformation_gradient,
+            old_stress: &ps.stress,
+            new_stress: &new.stress,
+            body_acceleration: self.body_force.then_some(&work.body_acceleration[..]),
+        };
+        let (stress, mut external) = states.work();
+        let b = &*self.boundary;
+        if b.has_tractions() && !work.boundary_updates.is_empty() {
+            let moved = work.boundary_updates.iter().map(|u| u.position);
+            external += traction_work(&b.traction, &b.area_normal, &b.position, moved);
+        }
+        self.energy.stress_work += stress;
+        self.energy.external_work += external;
     }
 }
 

@@ -19,7 +19,7 @@
 //! `--material neo-hookean|drucker-prager` (Drucker–Prager with a cohesion so high that the
 //! block stays elastic, so the return mapping runs and finds nothing), `--padding CELLS` (that
 //! many more empty cells on every side), `--memory` (bytes per particle and per node on
-//! stderr), `--vtk DIR` (after the timed steps, writes the particles as one `.vtu` file into
+//! stderr), `--energy` (the energy accounting on, `Sim::set_energy_accounting`), `--vtk DIR` (after the timed steps, writes the particles as one `.vtu` file into
 //! `DIR` in each format, binary and ASCII, three times each, and gives on stderr each format's
 //! size and best write time); the defaults are the benchmark block below. A step the
 //! engine rejects (an inverted particle, say) ends the timing: the line reports the steps before
@@ -70,6 +70,7 @@ struct Args {
     padding: usize,
     memory: bool,
     shuffle: bool,
+    energy: bool,
     sort: bool,
     vtk: Option<std::path::PathBuf>,
 }
@@ -93,6 +94,7 @@ fn parse() -> Result<Args, String> {
         padding: 0,
         memory: false,
         shuffle: false,
+        energy: false,
         sort: true,
         vtk: None,
     };
@@ -119,6 +121,7 @@ fn parse() -> Result<Args, String> {
             "--stored-stencils" => a.stored = true,
             "--transfer" => a.transfer = Some(val()?),
             "--gravity" => a.gravity = true,
+            "--energy" => a.energy = true,
             "--memory" => a.memory = true,
             "--shuffle" => a.shuffle = true,
             "--no-sort" => a.sort = false,
@@ -131,7 +134,7 @@ fn parse() -> Result<Args, String> {
                      [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
-                     [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--vtk DIR]"
+                     [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--energy] [--vtk DIR]"
                         .into(),
                 )
             }
@@ -210,6 +213,7 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     }
     .map_err(e)?;
     let mat = sim.add_material(material);
+    sim.set_energy_accounting(a.energy);
     if a.gravity {
         let mut g = Vector::<D>::zeros();
         g[D - 1] = -9.81;

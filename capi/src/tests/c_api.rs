@@ -324,6 +324,68 @@ fn every_error_status_is_reachable_and_changes_nothing() {
         assert!((momenta.linear[0] - px).abs() <= 1e-13 * px.abs().max(kinetic.sqrt()));
         assert_eq!(momenta.linear[2], 0.0);
         assert_eq!(rkmpm_sim_energies(sim, null_mut()), RKMPM_ERR_NULL_POINTER);
+        // The energy balance: refused while the accounting is off, and a bad flag leaves it
+        // off.
+        let mut balance = RkmpmEnergyBalance::default();
+        assert_eq!(
+            rkmpm_sim_energy_balance(sim, &mut balance),
+            RKMPM_ERR_INVALID_STATE
+        );
+        assert!(
+            last_error().contains("accounting is off"),
+            "{}",
+            last_error()
+        );
+        assert_eq!(
+            rkmpm_sim_set_energy_accounting(sim, 2),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert_eq!(
+            rkmpm_sim_energy_balance(sim, &mut balance),
+            RKMPM_ERR_INVALID_STATE
+        );
+        // On, on another block: three steps of free fall, whose ledger closes.
+        let other = sim2d(false);
+        let g = [0.0, -9.81];
+        assert_eq!(rkmpm_sim_set_gravity(other, g.as_ptr()), RKMPM_OK);
+        assert_eq!(rkmpm_sim_set_energy_accounting(other, 1), RKMPM_OK);
+        let mut start = RkmpmEnergies::default();
+        assert_eq!(rkmpm_sim_energies(other, &mut start), RKMPM_OK);
+        assert_eq!(rkmpm_sim_energy_balance(other, &mut balance), RKMPM_OK);
+        assert_eq!(
+            (
+                balance.start,
+                balance.stress_work,
+                balance.other_dissipation
+            ),
+            (start.kinetic + start.stored + start.gravitational, 0.0, 0.0)
+        );
+        for _ in 0..3 {
+            assert_eq!(rkmpm_sim_step(other, step_dt), RKMPM_OK);
+        }
+        assert_eq!(rkmpm_sim_energy_balance(other, &mut balance), RKMPM_OK);
+        let mut now = RkmpmEnergies::default();
+        assert_eq!(rkmpm_sim_energies(other, &mut now), RKMPM_OK);
+        assert_eq!(
+            (balance.kinetic, balance.stored, balance.gravitational),
+            (now.kinetic, now.stored, now.gravitational)
+        );
+        // Free fall: symplectic Euler takes `½ M g² Δt²` a step (M = 16 × 2.5 kg).
+        let expected = 3.0 * 0.5 * 40.0 * 9.81f64.powi(2) * step_dt * step_dt;
+        assert!(
+            (balance.other_dissipation - expected).abs() <= 1e-9 * expected,
+            "{balance:?}, expected {expected:e}"
+        );
+        let closed = balance.start + balance.external_work
+            - balance.material_dissipation
+            - balance.other_dissipation;
+        let total = now.kinetic + now.stored + now.gravitational;
+        assert!(
+            (closed - total).abs() <= 1e-12 * balance.start.abs(),
+            "{balance:?}"
+        );
+        assert_eq!(rkmpm_sim_set_energy_accounting(other, 0), RKMPM_OK);
+        rkmpm_sim_free(other);
         assert_eq!(
             rkmpm_sim_momenta(null(), &mut momenta),
             RKMPM_ERR_NULL_POINTER
