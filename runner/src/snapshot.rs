@@ -192,7 +192,6 @@ pub fn write_panels<const D: usize>(
     let ((x0, x1), (y0, y1)) = (range(a), range(b));
     let all: Vec<f64> = fields.iter().flat_map(|f| f.0.iter().copied()).collect();
     let scale = ColourScale::of(&all, field == "material");
-    let (lo, span) = (scale.lo, scale.hi - scale.lo);
     let panel = if runs.len() > 1 { 800u32 } else { 1000 };
     let width = panel * runs.len().max(1) as u32;
     let head = if runs.len() > 1 { 40.0 } else { 0.0 };
@@ -249,13 +248,11 @@ pub fn write_panels<const D: usize>(
             .map_err(|e| fail(Box::new(e)))?;
         let dot = ((panel as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
         chart
-            .draw_series(x.iter().zip(v).map(|(p, &c)| {
-                Circle::new(
-                    (p[a], p[b]),
-                    dot,
-                    colour(((c - lo) / span).clamp(0.0, 1.0)).filled(),
-                )
-            }))
+            .draw_series(
+                x.iter().zip(v).map(|(p, &c)| {
+                    Circle::new((p[a], p[b]), dot, colour(scale.position(c)).filled())
+                }),
+            )
             .map_err(|e| fail(Box::new(e)))?;
     }
     root.present().map_err(|e| fail(Box::new(e)))?;
@@ -271,14 +268,19 @@ fn extremes(v: &[f64]) -> (f64, f64) {
 }
 
 /// The values the colours run between. A field with a long tail (a few particles far beyond
-/// the rest: the pressure spikes of material-point integration, plastic strain concentrated in
-/// a band) is drawn between its 1st and 99th percentiles, so that the body shows, and values
-/// beyond take the end colours; the bar says so and gives the extremes.
+/// the rest: the pressure spikes of material-point integration) is drawn between its 1st and
+/// 99th percentiles, so that the body shows, and values beyond take the end colours; the bar
+/// says so and gives the extremes. A field whose positive values span at least two decades and
+/// whose median sits nearer the middle of the bar on a log scale than on the linear one (plastic
+/// strain: most of a collapsed heap near 1, shear bands up to 23) is drawn on a log scale from
+/// the 1st percentile of its positive values to its largest, smaller values at the low end; the
+/// bar says so.
 struct ColourScale {
     lo: f64,
     hi: f64,
     extremes: (f64, f64),
     clipped: bool,
+    log: bool,
 }
 
 impl ColourScale {
@@ -300,12 +302,49 @@ impl ColourScale {
             }
         };
         let hi = if hi > lo { hi } else { lo + 1.0 };
-        ColourScale {
+        let linear = ColourScale {
             lo,
             hi,
             extremes,
             clipped,
+            log: false,
+        };
+        if sorted.len() < 100 || discrete {
+            return linear;
         }
+        let positive = &sorted[sorted.partition_point(|&v| v <= 0.0)..];
+        if positive.is_empty() {
+            return linear;
+        }
+        let low = positive[((positive.len() - 1) as f64 * 0.01).round() as usize];
+        if extremes.1 < 100.0 * low {
+            return linear;
+        }
+        let log = ColourScale {
+            lo: low,
+            hi: extremes.1,
+            extremes,
+            clipped: false,
+            log: true,
+        };
+        // The scale on which the body (its median) sits nearer the middle of the bar.
+        let median = at(0.5);
+        let off_centre = |s: &ColourScale| (s.position(median) - 0.5).abs();
+        if off_centre(&log) < off_centre(&linear) {
+            log
+        } else {
+            linear
+        }
+    }
+
+    /// Where `v` falls on the colour bar, from 0 to 1.
+    fn position(&self, v: f64) -> f64 {
+        let t = if self.log {
+            (v.max(self.lo).ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        };
+        t.clamp(0.0, 1.0)
     }
 }
 
@@ -331,7 +370,11 @@ where
     }
     area.draw(&Rectangle::new([(x0, y0), (x1, y1)], BLACK.stroke_width(1)))?;
     let font = ("sans-serif", 14).into_font();
-    let mid = 0.5 * (scale.lo + scale.hi);
+    let mid = if scale.log {
+        (scale.lo * scale.hi).sqrt()
+    } else {
+        0.5 * (scale.lo + scale.hi)
+    };
     for (x, v) in [(x0, scale.lo), ((x0 + x1) / 2, mid), (x1, scale.hi)] {
         area.draw(&Text::new(
             format!("{v:.3e}"),
@@ -343,6 +386,11 @@ where
         format!(
             "{label}: 1st to 99th percentile, beyond drawn at the ends (all from {:.3e} to {:.3e})",
             scale.extremes.0, scale.extremes.1
+        )
+    } else if scale.log {
+        format!(
+            "{label}: log scale, from the 1st percentile of the positive values (all from {:.3e})",
+            scale.extremes.0
         )
     } else {
         label.to_string()
@@ -415,5 +463,45 @@ mod tests {
         // A constant field still gets a scale of nonzero width.
         let s = ColourScale::of(&[3.0; 200], false);
         assert_eq!((s.lo, s.hi), (3.0, 4.0));
+        assert!(!s.log && !ColourScale::of(&plain, false).log);
+    }
+
+    /// A positive field whose body sits at the bottom of a range of decades (plastic strain of a
+    /// collapse: zeros, most near 1, a band up to 23) takes a log scale from its positive 1st
+    /// percentile; the clipped field above, whose body fills its range, does not.
+    #[test]
+    fn skewed_positive_fields_take_a_log_scale() {
+        let mut v: Vec<f64> = (0..1000).map(|i| 1e-3 * 1.01f64.powi(i % 500)).collect();
+        v[0] = 0.0;
+        v.extend((0..40).map(|i| 5.0 + 0.45 * i as f64));
+        let s = ColourScale::of(&v, false);
+        assert!(s.log && !s.clipped);
+        assert_eq!(s.hi, 5.0 + 0.45 * 39.0);
+        assert!(s.lo > 0.0 && s.lo < 2e-3, "{}", s.lo);
+        assert_eq!(s.position(0.0), 0.0);
+        assert_eq!(s.position(s.hi), 1.0);
+        let mid = s.position((s.lo * s.hi).sqrt());
+        assert!((mid - 0.5).abs() < 1e-12, "{mid}");
+        // A heap's plastic strain: from 2e-3 to 1.5 for half the body, to 3 for most of the
+        // rest, a band up to 23. Its median sits at 6 % of the linear bar and near the middle
+        // of the log one.
+        let heap: Vec<f64> = (0..1000)
+            .map(|i| match i {
+                0..500 => 2e-3 * 750f64.powf(i as f64 / 500.0),
+                500..950 => 1.5 + 1.5 * (i - 500) as f64 / 450.0,
+                _ => 3.0 + 20.0 * (i - 950) as f64 / 49.0,
+            })
+            .collect();
+        let s = ColourScale::of(&heap, false);
+        assert!(
+            s.log && (s.position(1.5) - 0.5).abs() < 0.25,
+            "{}",
+            s.position(1.5)
+        );
+        // Values spanning less than two decades stay linear.
+        let narrow: Vec<f64> = (0..1000)
+            .map(|i| 1.0 + (i % 10) as f64 * 0.01 + if i < 20 { 50.0 } else { 0.0 })
+            .collect();
+        assert!(!ColourScale::of(&narrow, false).log);
     }
 }

@@ -16,7 +16,8 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::{Field, Integration, Shape};
+use rkmpm::{Integration, Shape};
+use rkmpm_runner::snapshot::write_panels;
 use rkmpm_studies::scenes::{log_log_slope, CollapseResult, GranularColumn, NGUYEN_BUI_FUKAGAWA};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -352,40 +353,16 @@ fn plot(rows: &[CollapseResult], path: &Path) -> Result<(), Box<dyn std::error::
     Ok(())
 }
 
-/// The final heap, particles coloured by equivalent plastic strain.
+/// The final heap, particles coloured by equivalent plastic strain, with the colour bar of the
+/// runner's pictures.
 fn snapshot(sim: &rkmpm::Sim<2>, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
-    let x = sim.field(Field::Position);
-    let eps = sim.field(Field::PlasticStrain);
-    let xmax = x.chunks(2).map(|p| p[0]).fold(0.0, f64::max) * 1.05;
-    let ymax = x.chunks(2).map(|p| p[1]).fold(0.0, f64::max) * 1.3;
-    let emax = eps.iter().copied().fold(1e-12, f64::max);
-    let width = 1200u32;
-    let height = ((width as f64) * ymax / xmax).clamp(200.0, 800.0) as u32 + 80;
-    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("Final heap, a = 2: equivalent plastic strain (0 blue … {emax:.2} red)"),
-            ("sans-serif", 20),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..xmax, 0.0..ymax)?;
-    chart
-        .configure_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .draw()?;
-    chart.draw_series(x.chunks(2).zip(&eps).map(|(p, &e)| {
-        let t = (e / emax).clamp(0.0, 1.0);
-        let c = RGBColor(
-            (255.0 * t) as u8,
-            (80.0 * (1.0 - t)) as u8,
-            (255.0 * (1.0 - t)) as u8,
-        );
-        Circle::new((p[0], p[1]), 2, c.filled())
-    }))?;
-    root.present()?;
+    let title = "Final heap, a = 2";
+    write_panels(
+        &[(sim, title.to_string())],
+        "plastic_strain",
+        title,
+        path,
+        None,
+    )?;
     Ok(())
 }

@@ -24,10 +24,9 @@
 //! `docs/validation/penetration/limit_{CELLS}cells_{MM}mm.md` (per speed: 6 cells, 40 mm, about
 //! a minute; 80 mm, 3–4 minutes; 12 cells, 40 mm, about 25 minutes).
 
-use plotters::prelude::*;
-use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::{Field, Integration, Shape, Sim};
+use rkmpm::{Integration, Shape, Sim};
+use rkmpm_runner::snapshot::write_panels;
 use rkmpm_studies::scenes::{recht_ipson_fit, Penetration, PenetrationResult};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -38,12 +37,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = root.join("docs/validation/penetration");
     std::fs::create_dir_all(&out)?;
     std::fs::create_dir_all(root.join("out/penetration"))?;
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-    )
-    .map_err(|_| "font")?;
     if std::env::args().any(|a| a == "--methods") {
         return sweep(&out);
     }
@@ -552,76 +545,36 @@ fn sweep(out: &Path) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// A plane-strain run's particles coloured by damage.
+/// A plane-strain run's particles coloured by damage, with the colour bar of the runner's
+/// pictures.
 fn plane_snapshot(
     sim: &Sim<2>,
     title: &str,
     path: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let x = sim.field(Field::Position);
-    let points: Vec<(f64, f64)> = x.chunks(2).map(|p| (p[0], p[1])).collect();
-    snapshot(&points, &sim.field(Field::Damage), title, path)
+    write_panels(&[(sim, title.to_string())], "damage", title, path, None)?;
+    Ok(())
 }
 
-/// A 3D quarter model's section `y < h/2` coloured by damage.
+/// A 3D quarter model coloured by damage: the section through its first layer of particles
+/// along y, next to the symmetry plane y = 0.
 fn quarter_snapshot(
     sim: &Sim<3>,
     title: &str,
     path: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let h = sim.grid().cell_size;
-    let x = sim.field(Field::Position);
-    let d = sim.field(Field::Damage);
-    let (points, damage): (Vec<(f64, f64)>, Vec<f64>) = x
-        .chunks(3)
-        .zip(&d)
-        .filter(|(p, _)| p[1] < h / 2.0)
-        .map(|(p, &d)| ((p[0], p[2]), d))
-        .unzip();
-    snapshot(
-        &points,
-        &damage,
-        &format!("{title} (section y < h/2)"),
+    let first = sim
+        .particles()
+        .position
+        .iter()
+        .map(|x| x[1])
+        .fold(f64::INFINITY, f64::min);
+    write_panels(
+        &[(sim, title.to_string())],
+        "damage",
+        title,
         path,
-    )
-}
-
-/// Particles (in the plane of the picture) coloured by damage.
-fn snapshot(
-    points: &[(f64, f64)],
-    damage: &[f64],
-    title: &str,
-    path: &Path,
-) -> Result<(), Box<dyn std::error::Error>> {
-    let xmax = points.iter().map(|p| p.0).fold(0.0, f64::max) * 1.05e3;
-    let (ymin, ymax) = points.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-        (a.min(p.1), b.max(p.1))
-    });
-    let root = BitMapBackend::new(path, (600, 1000)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("{title}: damage 0 (blue) … 1 (red)"),
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..xmax, (ymin * 1e3 - 1.0)..(ymax * 1e3 + 1.0))?;
-    chart
-        .configure_mesh()
-        .x_desc("distance from the axis (mm)")
-        .y_desc("height (mm)")
-        .draw()?;
-    chart.draw_series(points.iter().zip(damage).map(|(p, &d)| {
-        let t = d.clamp(0.0, 1.0);
-        let c = RGBColor(
-            (255.0 * t) as u8,
-            (80.0 * (1.0 - t)) as u8,
-            (255.0 * (1.0 - t)) as u8,
-        );
-        Circle::new((p.0 * 1e3, p.1 * 1e3), 2, c.filled())
-    }))?;
-    root.present()?;
+        Some(first),
+    )?;
     Ok(())
 }

@@ -7,10 +7,8 @@
 //! `cargo run --release --example taylor_bar [-- --quick]` (about 10 minutes on 2 cores; `--quick`
 //! runs 4 cells across the radius only).
 
-use plotters::prelude::*;
-use plotters::style::FontStyle;
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm::Field;
+use rkmpm_runner::snapshot::write_panels;
 use rkmpm_studies::scenes::{TaylorBar, TaylorCase, TaylorResult};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -21,12 +19,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = root.join("docs/validation/taylor");
     std::fs::create_dir_all(&out)?;
     std::fs::create_dir_all(root.join("out/taylor"))?;
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        include_bytes!("../../assets/fonts/DejaVuSans.ttf"),
-    )
-    .map_err(|_| "font")?;
     let runs: Vec<(TaylorCase, usize)> = if quick {
         vec![(TaylorCase::Bilinear, 4), (TaylorCase::OfhcCopper, 4)]
     } else {
@@ -97,42 +89,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// Side view (x–z) of the final quarter rod, coloured by equivalent plastic strain.
+/// The final rod coloured by plastic strain, with the colour bar of the runner's pictures: the
+/// section through its first layer of particles along y, next to the symmetry plane y = 0 (the
+/// rod's profile).
 fn snapshot(
     sim: &rkmpm::Sim<3>,
     title: &str,
     path: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let x = sim.field(Field::Position);
-    let eps = sim.field(Field::PlasticStrain);
-    let emax = eps.iter().copied().fold(1e-12, f64::max);
-    let zmax = x.chunks(3).map(|p| p[2]).fold(0.0, f64::max) * 1.05e3;
-    let rmax = x.chunks(3).map(|p| p[0].hypot(p[1])).fold(0.0, f64::max) * 1.1e3;
-    let root = BitMapBackend::new(path, (700, 900)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("{title}: ε̄ 0 (blue) … {emax:.2} (red)"),
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..rmax.max(8.0), 0.0..zmax)?;
-    chart
-        .configure_mesh()
-        .x_desc("distance from the axis (mm)")
-        .y_desc("z (mm)")
-        .draw()?;
-    chart.draw_series(x.chunks(3).zip(&eps).map(|(p, &e)| {
-        let t = (e / emax).clamp(0.0, 1.0);
-        let c = RGBColor(
-            (255.0 * t) as u8,
-            (80.0 * (1.0 - t)) as u8,
-            (255.0 * (1.0 - t)) as u8,
-        );
-        Circle::new((p[0].hypot(p[1]) * 1e3, p[2] * 1e3), 1, c.filled())
-    }))?;
-    root.present()?;
+    let first = sim
+        .particles()
+        .position
+        .iter()
+        .map(|x| x[1])
+        .fold(f64::INFINITY, f64::min);
+    write_panels(
+        &[(sim, title.to_string())],
+        "plastic_strain",
+        title,
+        path,
+        Some(first),
+    )?;
     Ok(())
 }
