@@ -11,7 +11,7 @@
 //! that has AVX2 and FMA ([`Lanes::detect`]), which is what makes the calls compiled for them
 //! sound. `RKMPM_PORTABLE=1` in the environment (read once) makes `detect` keep the baseline
 //! too, for a whole process. AVX-512 was tried too (BENCHMARKS.md): it made the 3D gather
-//! slower and gained about 1% elsewhere, so it is not a path.
+//! slower and particle to grid no faster, so it is not a path.
 
 use std::sync::OnceLock;
 
