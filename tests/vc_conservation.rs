@@ -138,7 +138,39 @@ fn vc_conserves_linear_momentum_3d_over_1000_steps() {
 /// of each other about the node plane x = 1/2: the largest mirror mismatch of positions
 /// (`x_p + x_p' − 1`, `y_p − y_p'`) after the impact, relative to the block's size.
 fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: Transfer) -> f64 {
-    let cells = 16;
+    mirror_mismatch_of_drop::<D>(shape, order, transfer, Drop::STUDY)
+}
+
+/// The grid, the block and the fall of a mirror-symmetric drop.
+#[derive(Clone, Copy)]
+struct Drop {
+    cells: usize,
+    /// Particles per side of the mirror plane along x (twice that along the other axes).
+    half: usize,
+    /// Height of the block's lowest particle row's cell edge above the floor.
+    bottom: f64,
+    /// Simulated time: the fall and the impact.
+    duration: f64,
+}
+
+impl Drop {
+    /// 16 cells, 12 particles across, the block's base at 0.14: 0.4 s, the fall (0.17 s) and
+    /// the impact.
+    const STUDY: Drop = Drop {
+        cells: 16,
+        half: 6,
+        bottom: 0.14,
+        duration: 0.4,
+    };
+}
+
+fn mirror_mismatch_of_drop<const D: usize>(
+    shape: Shape,
+    order: Option<u32>,
+    transfer: Transfer,
+    drop: Drop,
+) -> f64 {
+    let cells = drop.cells;
     let h = 1.0 / cells as f64;
     let mut sim = Sim::<D>::new(V::<D>::zeros(), [cells; D], h).unwrap();
     sim.set_shape(shape).unwrap();
@@ -153,7 +185,7 @@ fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: T
     sim.set_gravity(g).unwrap();
     let mat = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
     let s = h / 2.0;
-    let half = 6usize; // particles per side of the plane
+    let half = drop.half; // particles per side of the plane
     let n = 2 * half;
     let mut rng = UniformRng::new(3);
     let mut x = Vec::new();
@@ -164,14 +196,14 @@ fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: T
             let (count, start) = if a == 0 {
                 (half, 0.5 - half as f64 * s)
             } else {
-                (n, 0.14)
+                (n, drop.bottom)
             };
             let i = r % count;
             r /= count;
             start + (i as f64 + 0.5) * s
         });
         if D == 3 {
-            p[2] += 0.5 - 0.14 - 0.5 * n as f64 * s;
+            p[2] += 0.5 - drop.bottom - 0.5 * n as f64 * s;
         }
         for a in 0..D {
             p[a] += (2.0 * rng.uniform() - 1.0) * 0.3 * s;
@@ -183,25 +215,27 @@ fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: T
     }
     let vol = vec![s.powi(D as i32); x.len()];
     sim.add_particles(mat, &x, &vol, None).unwrap();
-    // 0.4 s: the fall (0.17 s) and the impact.
+    let mismatch = |sim: &Sim<D>| {
+        let ps = sim.particles();
+        let mut at = vec![0; ps.len()];
+        for p in 0..ps.len() {
+            at[ps.id[p] as usize] = p;
+        }
+        let mut worst = 0.0f64;
+        for k in 0..ps.len() / 2 {
+            let (a, b) = (ps.position[at[2 * k]], ps.position[at[2 * k + 1]]);
+            worst = worst.max((a[0] + b[0] - 1.0).abs());
+            for c in 1..D {
+                worst = worst.max((a[c] - b[c]).abs());
+            }
+        }
+        worst / (n as f64 * s)
+    };
     let dt = 0.3 * sim.stable_dt(0.3).unwrap();
-    for _ in 0..(0.4 / dt) as usize {
+    for _ in 0..(drop.duration / dt) as usize {
         sim.step(dt).unwrap();
     }
-    let ps = sim.particles();
-    let mut at = vec![0; ps.len()];
-    for p in 0..ps.len() {
-        at[ps.id[p] as usize] = p;
-    }
-    let mut worst = 0.0f64;
-    for k in 0..ps.len() / 2 {
-        let (a, b) = (ps.position[at[2 * k]], ps.position[at[2 * k + 1]]);
-        worst = worst.max((a[0] + b[0] - 1.0).abs());
-        for c in 1..D {
-            worst = worst.max((a[c] - b[c]).abs());
-        }
-    }
-    worst / (n as f64 * s)
+    mismatch(&sim)
 }
 
 /// Issue target: a mirror-symmetric problem stays symmetric with VC, to round-off.
@@ -237,11 +271,48 @@ fn vc_keeps_a_dropped_block_mirror_symmetric() {
     }
     // 3D RK2 + VC2 is left out: its system (`7^3`-node stencils, blocks of `4 × 4`) is above
     // the assembly's size limit on this grid, and the matrix-free solve took more than 20
-    // minutes for the 0.4 s of the drop.
+    // minutes for the 0.4 s of the drop; a smaller drop is
+    // `vc2_3d_mirror_symmetry_of_a_small_drop`, which does not keep it to round-off.
     let mismatch = mirror_mismatch::<3>(rk1, Some(1), apic);
     eprintln!("3D RK1 + VC1: mirror mismatch {mismatch:.2e}");
     assert!(
         mismatch < 1e-13,
         "3D RK1 + VC1: mirror mismatch {mismatch:e}"
     );
+}
+
+/// 3D RK2 + VC2 on a small drop (8 cells, 8 particles across; its system on the study's
+/// 16 cells is above the assembly's size limit and took over 20 minutes matrix-free).
+/// **The target, symmetry to round-off, is not met here**: the mismatch is 6.5e-14 after 28
+/// steps, then jumps in three steps (30, 34, 36: velocity mismatches of 5.7e-10, 2.9e-8 and
+/// 8.7e-7 at particles on the block's outer x faces, far from the mirror plane) to 4.4e-9 at
+/// step 40 and 3.2e-9 at step 120 (0.12 s, 112 s of run time). With the solve's tolerance at
+/// 1e-10 instead of 1e-12 the early steps' mismatch is 100 times larger (step 10: 5.2e-13
+/// against 2.2e-15) but step 40's is the same (4.95e-9): the jumps do not come from the
+/// tolerance. Likely (not verified): the components of the solution along the near-null
+/// directions of nodes the particles barely reach, which conjugate gradients leave at
+/// whatever its iterates hold, without mirror symmetry. Without VC (2.2e-15) and with VC1
+/// (2.7e-15) the same drop keeps it. The bound guards what holds now (42 steps, about 45 s).
+#[test]
+#[ignore = "long (45 s); documents a missed target: 3D RK2 + VC2 mirror symmetry"]
+fn vc2_3d_mirror_symmetry_of_a_small_drop() {
+    let rk2 = Shape::Rk {
+        order: 2,
+        support: 3.0,
+    };
+    let drop = Drop {
+        cells: 8,
+        half: 4,
+        bottom: 0.02,
+        duration: 0.042,
+    };
+    let pic = Transfer::PicFlip { flip: 0.0 };
+    let mismatch = mirror_mismatch_of_drop::<3>(rk2, Some(2), pic, drop);
+    eprintln!("3D RK2 + VC2, small drop: mirror mismatch {mismatch:.2e}");
+    assert!(
+        mismatch < 1e-8,
+        "3D RK2 + VC2: mirror mismatch {mismatch:e}"
+    );
+    let without = mirror_mismatch_of_drop::<3>(rk2, None, pic, drop);
+    assert!(without < 1e-13, "3D RK2: mirror mismatch {without:e}");
 }
