@@ -492,12 +492,20 @@ fn summary<const D: usize>(
     println!("energy at the end:   {}", line(&e1));
     match sim.energy_balance() {
         Ok(b) => {
+            // Without plasticity or damage the stress work less the stored energy's change is
+            // the time integration's error, not a dissipation of the material's.
+            let material = match ps.history.is_empty() {
+                true => format!(
+                    "stress work less the stored energy {:.4e} (elastic: the time \
+                     integration's error)",
+                    b.material_dissipation
+                ),
+                false => format!("plasticity and damage {:.4e}", b.material_dissipation),
+            };
             println!(
-                "energy change {:.4e} = external work {:.4e} (body force, tractions) \
-                 - plasticity and damage {:.4e}",
+                "energy change {:.4e} = external work {:.4e} (body force, tractions) - {material}",
                 e1.total() - e0.total(),
                 b.external_work,
-                b.material_dissipation
             );
             println!(
                 "                     - walls, contact and the scheme (transfer, time \
