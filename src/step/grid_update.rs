@@ -23,8 +23,7 @@ const EDGE_MASS_FRACTION: f64 = 1e-2;
 /// `velocity_old = (mv)/m` and `velocity = ((mv) + Δt f)/m`, applies friction walls and sets the
 /// ghost velocities. With `None` (the second map of MUSL): folds momentum only and sets
 /// `velocity = (mv)/m`. Nodes with mass at or below `mass_floor` get zero velocity; nothing is
-/// divided by a negligible mass. Returns the kinetic energy the friction walls took from the
-/// nodes ([`Walls::apply_friction`]).
+/// divided by a negligible mass.
 ///
 /// `no_force`: nothing was mapped to `force` (MLS without tractions, whose forces ride on the
 /// momentum). Without a body force kept apart, the velocity is then
@@ -38,7 +37,7 @@ pub fn grid_update<const D: usize>(
     dt: Option<f64>,
     mass_floor: f64,
     no_force: bool,
-) -> f64 {
+) {
     walls.fold(grid, nodes, dt.is_some());
     // Signed shape functions: nodes at the edge of a body have a tiny mass but not a tiny
     // force; their acceleration is taken against at least a fraction of the largest node mass
@@ -132,9 +131,8 @@ pub fn grid_update<const D: usize>(
             });
         }
     }
-    let friction = walls.apply_friction(grid, nodes);
+    walls.apply_friction(grid, nodes);
     walls.unfold(grid, nodes);
-    friction
 }
 
 #[cfg(test)]
