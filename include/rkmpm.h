@@ -228,7 +228,8 @@ typedef struct RkmpmEnergies {
  * Where a run's energy went since the accounting started (`rkmpm_sim_set_energy_accounting`;
  * per unit thickness in 2D), from `rkmpm_sim_energy_balance`. The balance
  * `kinetic + stored + gravitational = start + external_work - material_dissipation -
- * other_dissipation` holds by the definition of `other_dissipation`.
+ * friction_dissipation - contact_dissipation - other_dissipation` holds by the definition of
+ * `other_dissipation`.
  */
 typedef struct RkmpmEnergyBalance {
   /**
@@ -256,9 +257,19 @@ typedef struct RkmpmEnergyBalance {
    */
   double material_dissipation;
   /**
-   * The rest: impacts and friction at walls, contact, rigid bodies driven at a given
-   * velocity, and the scheme's numerical dissipation (the transfer's and the time
-   * integration's).
+   * The friction walls' work on the slip, `sum m_I (v_I - v_I*).v_I*` over the nodes they
+   * changed (`v*` the velocity they leave) and the steps.
+   */
+  double friction_dissipation;
+  /**
+   * The same sum for the contact correction at the nodes bodies share: the contact
+   * friction's work on the slip (0 to round-off without friction), less the work of a rigid
+   * body pushing a deformable one.
+   */
+  double contact_dissipation;
+  /**
+   * The rest: the normal loss of impacts (on walls and between bodies), and the scheme's
+   * numerical dissipation (the transfer's and the time integration's).
    */
   double other_dissipation;
 } RkmpmEnergyBalance;

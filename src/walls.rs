@@ -215,7 +215,13 @@ impl<const D: usize> Walls<D> {
     }
 
     /// Applies the friction walls to the updated node velocities.
-    pub fn apply_friction(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) {
+    ///
+    /// Returns the work of the friction on the slip it leaves, `Σ m_I (v_I − v_I*)·v_I*` over
+    /// the nodes whose velocity it changed (in node order): the impulse against the velocity
+    /// after it, whose normal part is zero, so the wall's constraint (an impact's normal loss,
+    /// as at a mirror wall) is not counted as friction.
+    pub fn apply_friction(&self, grid: &Grid<D>, nodes: &mut GridNodes<D>) -> f64 {
+        let mut taken = 0.0;
         for axis in 0..D {
             for side in [Side::Low, Side::High] {
                 let Wall::Friction(mu) = self.faces[axis][side as usize] else {
@@ -233,14 +239,17 @@ impl<const D: usize> Walls<D> {
                         continue;
                     }
                     v[axis] = 0.0;
+                    let tangential = *v;
                     let vt = v.norm();
                     if vt <= mu * vn {
                         *v = Vector::zeros();
                     } else {
                         *v *= 1.0 - mu * vn / vt;
                     }
+                    taken += nodes.mass[n] * (tangential - *v).dot(v);
                 }
             }
         }
+        taken
     }
 }

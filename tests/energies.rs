@@ -350,3 +350,114 @@ fn apic_and_mls_conserve_angular_momentum_with_the_affine_part() {
         }
     }
 }
+
+/// A block of `nx × ny` particles (2 per cell per direction) with its lower left corner at
+/// `corner`, all moving at `v`.
+fn add_block(sim: &mut Sim<2>, material: u32, corner: V<2>, (nx, ny): (usize, usize), v: V<2>) {
+    let s = 0.5 * sim.grid().cell_size;
+    let x: Vec<V<2>> = (0..nx * ny)
+        .map(|k| corner + s * V::<2>::new(0.5 + (k % nx) as f64, 0.5 + (k / nx) as f64))
+        .collect();
+    sim.add_particles(material, &x, &vec![s * s; x.len()], Some(&vec![v; x.len()]))
+        .unwrap();
+}
+
+/// A block sliding on a friction floor (μ = 0.3) under gravity comes to rest after
+/// `v0 / (μ g)`; the energy it loses is the friction's work on the slip at the wall's nodes,
+/// up to the scheme's share.
+#[test]
+fn friction_takes_what_a_sliding_block_loses() {
+    let mut sim = Sim::<2>::new([0.0; 2], [48, 12], 1.0 / 32.0).unwrap();
+    let mat = sim.add_material(Material::neo_hookean(1000.0, 1e6, 0.3).unwrap());
+    sim.set_wall(1, rkmpm::Side::Low, rkmpm::Wall::Friction(0.3))
+        .unwrap();
+    sim.set_gravity(V::<2>::new(0.0, -9.81)).unwrap();
+    add_block(
+        &mut sim,
+        mat,
+        V::<2>::new(0.2, 0.0),
+        (16, 8),
+        V::<2>::new(1.0, 0.0),
+    );
+    sim.set_energy_accounting(true);
+    let start = sim.energies();
+    let dt = sim.stable_dt(0.3).unwrap();
+    // 0.5 s: the slide (0.34 s) and the rest.
+    for _ in 0..(0.5 / dt) as usize {
+        sim.step(dt).unwrap();
+    }
+    let b = sim.energy_balance().unwrap();
+    let lost = start.total() - b.now.total();
+    eprintln!(
+        "sliding block: lost {lost:e} of kinetic {:e}: {b:?}",
+        start.kinetic
+    );
+    assert!(b.now.kinetic < 1e-2 * start.kinetic, "{b:?}");
+    assert!(
+        b.friction_dissipation > 0.0 && b.contact_dissipation == 0.0,
+        "{b:?}"
+    );
+    // Measured: 14.91 of the 15.21 lost (98 %); the rest is the wall's constraint on the
+    // normal velocity and the transfer's loss.
+    assert!(
+        (b.friction_dissipation - lost).abs() <= 0.05 * lost,
+        "friction {:e} of {lost:e}: {b:?}",
+        b.friction_dissipation
+    );
+}
+
+/// Two elastic blocks meet head-on with contact on (friction `mu`), sliding past each other at
+/// `shear` across the contact plane. Returns the balance after the steps before their supports
+/// share a node and after 0.1 s more.
+fn colliding_blocks(mu: f64, shear: f64) -> (rkmpm::sim::EnergyBalance, rkmpm::sim::EnergyBalance) {
+    let mut sim = Sim::<2>::new([0.0; 2], [32, 24], 1.0 / 32.0).unwrap();
+    let left = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+    let right = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
+    sim.set_contact(Some(mu)).unwrap();
+    let v = V::<2>::new(2.0, shear / 2.0);
+    add_block(&mut sim, left, V::<2>::new(0.2, 0.25), (12, 12), v);
+    add_block(&mut sim, right, V::<2>::new(0.6, 0.25), (12, 12), -v);
+    sim.set_energy_accounting(true);
+    let dt = sim.stable_dt(0.3).unwrap();
+    // 0.2125 m between the blocks' edges, closing at 4 m/s; the supports (quadratic B-spline,
+    // 1.5 cells each side) meet when the gap is below 2.5 cells.
+    let apart = ((0.2 - 3.5 / 32.0) / 4.0 / dt) as usize;
+    for _ in 0..apart {
+        sim.step(dt).unwrap();
+    }
+    let before = sim.energy_balance().unwrap();
+    for _ in 0..(0.1 / dt) as usize {
+        sim.step(dt).unwrap();
+    }
+    (before, sim.energy_balance().unwrap())
+}
+
+/// Contact counts the work of its impulses on the velocities they leave: nothing before the
+/// bodies' supports share a node; frictionless, nothing at all (the normal impulses balance
+/// and leave equal normal velocities, so the head-on impact's loss is in the rest); with
+/// friction and slip, the friction's work. The balance closes in both.
+#[test]
+fn contact_counts_the_work_of_its_friction() {
+    let closes = |b: &rkmpm::sim::EnergyBalance| {
+        let closed = b.start
+            - b.material_dissipation
+            - b.friction_dissipation
+            - b.contact_dissipation
+            - b.other_dissipation;
+        (closed - b.now.total()).abs() <= 1e-12 * b.start
+    };
+    let (apart, frictionless) = colliding_blocks(0.0, 0.0);
+    eprintln!("frictionless: {frictionless:?}");
+    assert_eq!(apart.contact_dissipation, 0.0);
+    assert!(frictionless.contact_dissipation.abs() <= 1e-12 * frictionless.start);
+    // The impact took energy: in the rest.
+    assert!(frictionless.other_dissipation > 0.1 * frictionless.start);
+    assert!(closes(&frictionless), "{frictionless:?}");
+    let (apart, sliding) = colliding_blocks(0.5, 2.0);
+    eprintln!("with friction and slip: {sliding:?}");
+    assert_eq!(apart.contact_dissipation, 0.0);
+    // Measured: 1.41 of the 35.2 the tangential motion carries (friction acts at the nodes
+    // the bodies share while they touch), 0 to round-off without friction.
+    assert!(sliding.contact_dissipation > 2e-2 * 35.2, "{sliding:?}");
+    assert!(closes(&sliding), "{sliding:?}");
+}

@@ -116,13 +116,15 @@ module rkmpm
    !> Where a run's energy went since the accounting started (struct RkmpmEnergyBalance; per
    !> unit thickness in 2D): the energies now, the start (plus what the caller gave since), the
    !> external work (body-force callback, tractions), the stress work, what plasticity and
-   !> damage dissipated, and the rest (walls, contact, rigid drivers, the scheme), so that
+   !> damage dissipated, the work of friction at walls and in contact, and the rest (impacts'
+   !> normal loss, the scheme), so that
    !> kinetic + stored + gravitational = start + external_work - material_dissipation
-   !> - other_dissipation.
+   !> - friction_dissipation - contact_dissipation - other_dissipation.
    type, bind(C), public :: rkmpm_energy_balance
       real(c_double) :: kinetic = 0, stored = 0, gravitational = 0, start = 0
       real(c_double) :: external_work = 0, stress_work = 0
-      real(c_double) :: material_dissipation = 0, other_dissipation = 0
+      real(c_double) :: material_dissipation = 0, friction_dissipation = 0
+      real(c_double) :: contact_dissipation = 0, other_dissipation = 0
    end type rkmpm_energy_balance
 
    !> The particles' linear momentum and angular momentum about the origin (struct

@@ -1193,7 +1193,8 @@ pub struct RkmpmMomenta {
 /// Where a run's energy went since the accounting started (`rkmpm_sim_set_energy_accounting`;
 /// per unit thickness in 2D), from `rkmpm_sim_energy_balance`. The balance
 /// `kinetic + stored + gravitational = start + external_work - material_dissipation -
-/// other_dissipation` holds by the definition of `other_dissipation`.
+/// friction_dissipation - contact_dissipation - other_dissipation` holds by the definition of
+/// `other_dissipation`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RkmpmEnergyBalance {
@@ -1211,9 +1212,15 @@ pub struct RkmpmEnergyBalance {
     /// The stress work less the change of the stored energy: what plasticity and damage
     /// dissipated (for an elastic material, the trapezoidal rule's error, O(dt^2) over a run).
     pub material_dissipation: f64,
-    /// The rest: impacts and friction at walls, contact, rigid bodies driven at a given
-    /// velocity, and the scheme's numerical dissipation (the transfer's and the time
-    /// integration's).
+    /// The friction walls' work on the slip, `sum m_I (v_I - v_I*).v_I*` over the nodes they
+    /// changed (`v*` the velocity they leave) and the steps.
+    pub friction_dissipation: f64,
+    /// The same sum for the contact correction at the nodes bodies share: the contact
+    /// friction's work on the slip (0 to round-off without friction), less the work of a rigid
+    /// body pushing a deformable one.
+    pub contact_dissipation: f64,
+    /// The rest: the normal loss of impacts (on walls and between bodies), and the scheme's
+    /// numerical dissipation (the transfer's and the time integration's).
     pub other_dissipation: f64,
 }
 
@@ -1285,6 +1292,8 @@ pub unsafe extern "C" fn rkmpm_sim_energy_balance(
             external_work: b.external_work,
             stress_work: b.stress_work,
             material_dissipation: b.material_dissipation,
+            friction_dissipation: b.friction_dissipation,
+            contact_dissipation: b.contact_dissipation,
             other_dissipation: b.other_dissipation,
         };
         // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).

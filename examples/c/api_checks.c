@@ -858,7 +858,7 @@ static void lifetime_rows(void) {
     drop(&f);
   }
   ROW("energy_balance.null_sim", RKMPM_ERR_NULL_POINTER) {
-    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
+    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
     CALL(NULL, rkmpm_sim_energy_balance(NULL, &b));
     EXPECT(b.kinetic == 77.0 && b.other_dissipation == 77.0, "wrote the output after a failure");
   }
@@ -878,7 +878,7 @@ static void lifetime_rows(void) {
   }
   ROW("energy_balance.accounting_off", RKMPM_ERR_INVALID_STATE) {
     Fixture f = stepped_block(3);
-    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
+    RkmpmEnergyBalance b = {77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0};
     CALL(f.sim, rkmpm_sim_energy_balance(f.sim, &b));
     EXPECT(b.kinetic == 77.0 && b.start == 77.0, "wrote the output after a failure");
     drop(&f);

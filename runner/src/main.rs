@@ -507,8 +507,14 @@ fn summary<const D: usize>(
                 e1.total() - e0.total(),
                 b.external_work,
             );
+            if b.friction_dissipation != 0.0 || b.contact_dissipation != 0.0 {
+                println!(
+                    "                     - friction at walls {:.4e} - in contact {:.4e}",
+                    b.friction_dissipation, b.contact_dissipation
+                );
+            }
             println!(
-                "                     - walls, contact and the scheme (transfer, time \
+                "                     - impacts and the scheme (transfer, time \
                  integration) {:.4e}",
                 b.other_dissipation
             );

@@ -475,7 +475,17 @@ impl<const D: usize> Sim<D> {
         if version >= 3 {
             let e = &self.energy;
             w.u32(u32::from(e.on));
-            w.f64s([e.start, e.stored_start, e.stress_work, e.external_work].iter());
+            w.f64s(
+                [
+                    e.start,
+                    e.stored_start,
+                    e.stress_work,
+                    e.external_work,
+                    e.friction,
+                    e.contact,
+                ]
+                .iter(),
+            );
         }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
@@ -606,6 +616,8 @@ impl<const D: usize> Sim<D> {
                 stored_start: r.f64()?,
                 stress_work: r.f64()?,
                 external_work: r.f64()?,
+                friction: r.f64()?,
+                contact: r.f64()?,
             };
         }
         if !r.0.is_empty() {
@@ -713,7 +725,7 @@ mod tests {
         assert_eq!(old.particles(), sim.particles());
         // A flag other than 0 or 1 is refused.
         let mut bytes = sim.checkpoint_bytes();
-        let flag = bytes.len() - 4 - 4 * 8 - 4;
+        let flag = bytes.len() - 4 - 6 * 8 - 4;
         bytes[flag] = 2;
         let n = bytes.len();
         let crc = crc32fast::hash(&bytes[24..n - 4]).to_le_bytes();

@@ -79,13 +79,14 @@ impl Energies {
 /// per unit thickness in 2D). The balance
 ///
 /// ```text
-/// now.total() = start + external_work − material_dissipation − other_dissipation
+/// now.total() = start + external_work − material_dissipation − friction_dissipation
+///               − contact_dissipation − other_dissipation
 /// ```
 ///
 /// holds by the definition of `other_dissipation`, which is what no term measured on its own
-/// holds: impacts and friction at walls, contact between bodies, the work of rigid bodies driven
-/// at a given velocity, and the scheme's numerical dissipation (the transfer's, PIC above all,
-/// and the time integration's; for a body in free fall `½ M |g|² Δt²` per step).
+/// holds: the normal loss of impacts (on walls and between bodies in contact) and the scheme's
+/// numerical dissipation (the transfer's, PIC above all, and the time integration's; for a
+/// body in free fall `½ M |g|² Δt²` per step).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EnergyBalance {
     /// The energies now.
@@ -100,7 +101,17 @@ pub struct EnergyBalance {
     /// The stress work less the change of the stored energy: what plasticity and damage
     /// dissipated (for an elastic material, the trapezoidal rule's error, `O(Δt²)` over a run).
     pub material_dissipation: f64,
-    /// The rest: walls, contact, rigid drivers and the scheme (see the type's documentation).
+    /// The friction walls' work on the slip: `Σ m_I (v_I − v_I*)·v_I*` over the nodes they
+    /// changed (`v*` the velocity they leave) and the steps. Its normal part is zero: the normal
+    /// loss of an impact on the wall is in `other_dissipation`.
+    pub friction_dissipation: f64,
+    /// The same sum for the contact correction, over the deformable bodies' fields at the nodes
+    /// bodies share: the contact friction's work on the slip (the normal impulses balance and
+    /// leave equal normal velocities, so frictionless contact counts 0 to round-off), less the
+    /// work of a rigid body pushing one.
+    pub contact_dissipation: f64,
+    /// The rest: impacts (on walls and between bodies) and the scheme (see the type's
+    /// documentation).
     pub other_dissipation: f64,
 }
 
@@ -706,8 +717,12 @@ impl<const D: usize> Sim<D> {
             external_work: ledger.external_work,
             stress_work: ledger.stress_work,
             material_dissipation,
+            friction_dissipation: ledger.friction,
+            contact_dissipation: ledger.contact,
             other_dissipation: ledger.start + ledger.external_work
                 - material_dissipation
+                - ledger.friction
+                - ledger.contact
                 - now.total(),
         })
     }

@@ -5,11 +5,13 @@
 
 use super::profile::lap;
 use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs, ToGrid};
+use crate::energy::NodeLosses;
 use crate::error::Result;
 use crate::grid::GridNodes;
 use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use crate::options::Contact;
 use crate::shape::{StencilView, Stencils};
+use crate::Vector;
 
 /// The node fields of the bodies under contact, kept between steps.
 #[derive(Debug, Default)]
@@ -42,6 +44,7 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
     bodies: &mut BodyFields<D>,
     boundary_stencils: &mut Stencils<D>,
     times: &mut PhaseTimes,
+    losses: &mut NodeLosses,
 ) -> Result<(f64, BoundaryPoints<D>)> {
     let StepInputs {
         grid,
@@ -108,7 +111,10 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
             nodes,
         );
         mass_floor = mass_floor_fraction * largest_mass;
-        grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
+        let friction = grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
+        if rigid[b].is_none() {
+            losses.friction += friction;
+        }
         if let Some(v) = rigid[b] {
             for &n in &nodes.active {
                 nodes.velocity[n] = v;
@@ -117,7 +123,32 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
         }
     }
     find_shared_nodes(&bodies.nodes, &mut bodies.shared);
+    // The work of the correction's impulses on the deformable bodies' velocities after it,
+    // `Σ m (v − v*)·v*` at the shared nodes (in node order): their normal parts cancel (every
+    // body leaves a node with the same normal velocity, and the impulses balance), so what is
+    // counted is friction on the slip, and a rigid body's push (negative: its work).
+    let before: Vec<Vec<Vector<D>>> = bodies
+        .nodes
+        .iter()
+        .map(|f| bodies.shared.iter().map(|&n| f.velocity[n]).collect())
+        .collect();
     crate::contact::correct_velocities(&contact, &mut bodies.nodes, rigid, &bodies.shared);
+    let mut taken = 0.0;
+    for (k, &n) in bodies.shared.iter().enumerate() {
+        for ((field, v), _) in bodies
+            .nodes
+            .iter()
+            .zip(&before)
+            .zip(rigid)
+            .filter(|(_, r)| r.is_none())
+        {
+            if field.is_touched(n) {
+                let after = field.velocity[n];
+                taken += field.mass[n] * (v[k] - after).dot(&after);
+            }
+        }
+    }
+    losses.contact = taken;
     Ok((mass_floor, surfaces))
 }
 

@@ -23,7 +23,8 @@ const EDGE_MASS_FRACTION: f64 = 1e-2;
 /// `velocity_old = (mv)/m` and `velocity = ((mv) + Δt f)/m`, applies friction walls and sets the
 /// ghost velocities. With `None` (the second map of MUSL): folds momentum only and sets
 /// `velocity = (mv)/m`. Nodes with mass at or below `mass_floor` get zero velocity; nothing is
-/// divided by a negligible mass.
+/// divided by a negligible mass. Returns the kinetic energy the friction walls took from the
+/// nodes ([`Walls::apply_friction`]).
 ///
 /// `no_force`: nothing was mapped to `force` (MLS without tractions, whose forces ride on the
 /// momentum). Without a body force kept apart, the velocity is then
@@ -37,7 +38,7 @@ pub fn grid_update<const D: usize>(
     dt: Option<f64>,
     mass_floor: f64,
     no_force: bool,
-) {
+) -> f64 {
     walls.fold(grid, nodes, dt.is_some());
     // Signed shape functions: nodes at the edge of a body have a tiny mass but not a tiny
     // force; their acceleration is taken against at least a fraction of the largest node mass
@@ -131,8 +132,9 @@ pub fn grid_update<const D: usize>(
             });
         }
     }
-    walls.apply_friction(grid, nodes);
+    let friction = walls.apply_friction(grid, nodes);
     walls.unfold(grid, nodes);
+    friction
 }
 
 #[cfg(test)]

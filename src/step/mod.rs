@@ -58,7 +58,7 @@ pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces, ToGrid};
 
 use crate::cpu::Lanes;
-use crate::energy::{traction_work, EnergyLedger, StepStates};
+use crate::energy::{traction_work, EnergyLedger, NodeLosses, StepStates};
 use crate::error::Result;
 use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
@@ -103,6 +103,8 @@ pub struct Workspace<const D: usize> {
     /// Current particle volumes (for VC).
     pub volumes: Vec<f64>,
     pub boundary_updates: Vec<BoundaryUpdate<D>>,
+    /// What the step's friction walls and contact correction took from the node velocities.
+    pub node_losses: NodeLosses,
     pub nodes: GridNodes<D>,
     /// The bodies' node fields under contact; empty otherwise.
     pub bodies: BodyFields<D>,
@@ -442,6 +444,8 @@ impl<const D: usize> Step<'_, D> {
         }
         self.energy.stress_work += stress;
         self.energy.external_work += external;
+        self.energy.friction += work.node_losses.friction;
+        self.energy.contact += work.node_losses.contact;
     }
 }
 
@@ -517,12 +521,14 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
             volumes: &work.volumes,
             mass_floor_fraction,
         };
+        work.node_losses = NodeLosses::default();
         let result = contact::particle_to_grid_per_body(
             inputs,
             &body_inputs,
             &mut work.bodies,
             &mut work.boundary_stencils,
             &mut work.times,
+            &mut work.node_losses,
         );
         work.times.grid_update += lap(&mut clock);
         return result;
@@ -547,7 +553,7 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
     }
     work.times.particle_to_grid += lap(&mut clock);
     let no_force = forces.mls.is_some() && !boundary.has_tractions();
-    grid_update(
+    let friction = grid_update(
         grid,
         inputs.walls,
         &mut work.nodes,
@@ -555,6 +561,10 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
         mass_floor,
         no_force,
     );
+    work.node_losses = NodeLosses {
+        friction,
+        contact: 0.0,
+    };
     work.times.grid_update += lap(&mut clock);
     Ok((mass_floor, BoundaryPoints::default()))
 }
