@@ -284,9 +284,10 @@ typedef struct RkmpmMomenta {
   double linear[3];
   /**
    * `sum m_p x_p x v_p` about the origin (in 2D only the third component is not 0), plus,
-   * under APIC and MLS with a B-spline, the angular momentum the particles' affine velocities
-   * carry (Jiang et al. 2015), `sum m_p d eps : C_p` with `d = h^2/4` (quadratic) or `h^2/3`
-   * (cubic): the total the transfers conserve.
+   * under APIC and MLS with a B-spline or RK1 with support 2, the angular momentum the
+   * particles' affine velocities carry (Jiang et al. 2015), `sum m_p d eps : C_p` with
+   * `d = h^2/4` (quadratic) or `h^2/3` (cubic, and RK1 with support 2, which is the cubic):
+   * the total the transfers conserve.
    */
   double angular[3];
 } RkmpmMomenta;
@@ -561,7 +562,8 @@ enum RkmpmStatus rkmpm_sim_set_integration(struct RkmpmSim *sim,
 /**
  * Chooses the velocity transfer (before the first step); `flip_ratio` in [0, 1] is read only
  * for `RKMPM_TRANSFER_PIC_FLIP` (0 is PIC). APIC with RK order >= 2, and MLS with a shape
- * function other than the quadratic or cubic B-spline or with VC, are refused by the first step
+ * function other than the quadratic or cubic B-spline (or RK1 with support 2, which is the
+ * cubic) or with VC, are refused by the first step
  * (`RKMPM_ERR_UNSUPPORTED`), since the options may still be set in either order before it.
  *
  * # Safety

@@ -316,3 +316,44 @@ fn vc2_3d_mirror_symmetry_of_a_small_drop() {
     let without = mirror_mismatch_of_drop::<3>(rk2, None, pic, drop);
     assert!(without < 1e-13, "3D RK2: mirror mismatch {without:e}");
 }
+
+/// Issue target: with VC and a transfer that conserves angular momentum (APIC, with the
+/// B-splines and RK1), a free body's total angular momentum, the affine part included, stays
+/// what it was to round-off.
+///
+/// **Not met**: the correction sums to zero over a particle's nodes, but its first moment
+/// `A_p = Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` does not vanish, so `Σ_I x_I ⊗ ∇̂Ψ_I ≠ I` and a
+/// symmetric stress exerts a torque `−V_p ε : (A_p σ_p)` on the body. Measured on the free
+/// block here over 100 steps, relative to the starting total: see `docs/convergence/FINDINGS.md`
+/// ("VC and angular momentum"); without VC, APIC keeps it to 2e-14
+/// (`apic_and_mls_conserve_angular_momentum_with_the_affine_part`).
+#[test]
+#[ignore = "documents a missed target: VC does not conserve angular momentum"]
+fn vc_conserves_angular_momentum() {
+    fn drift<const D: usize>(shape: Shape, order: u32, transfer: Transfer) -> f64 {
+        let mut sim = free_block::<D>(shape, order, transfer);
+        let dt = sim.stable_dt(0.3).unwrap();
+        // The first step gives the affine matrices (they start at zero).
+        sim.step(dt).unwrap();
+        let start = sim.momenta().angular;
+        for _ in 0..100 {
+            sim.step(dt).unwrap();
+        }
+        (sim.momenta().angular - start).norm() / start.norm()
+    }
+    let mut failed = Vec::new();
+    for (name, shape, order, transfer) in methods() {
+        if transfer != Transfer::Apic {
+            continue;
+        }
+        let (d2, d3) = (
+            drift::<2>(shape, order, transfer),
+            drift::<3>(shape, order, transfer),
+        );
+        eprintln!("{name}: 2D {d2:.2e}, 3D {d3:.2e}");
+        if d2.max(d3) > 1e-12 {
+            failed.push(format!("{name}: 2D {d2:.1e}, 3D {d3:.1e}"));
+        }
+    }
+    assert!(failed.is_empty(), "{failed:?}");
+}

@@ -129,7 +129,7 @@ module rkmpm
 
    !> The particles' linear momentum and angular momentum about the origin (struct
    !> RkmpmMomenta; third components 0, and in 2D only angular(3) not 0), the affine
-   !> velocities' part included under APIC and MLS with a B-spline.
+   !> velocities' part included under APIC and MLS with a B-spline or RK1 with support 2.
    type, bind(C), public :: rkmpm_momenta
       real(c_double) :: linear(3) = 0, angular(3) = 0
    end type rkmpm_momenta

@@ -220,8 +220,8 @@ impl<const D: usize> ReproducingKernel<D> {
 /// make it one everywhere) its moment matrix is the same in every cell and the correction is the
 /// identity: the functions are the cubic B-spline's (METHOD.md section 2; equal to 1e-13 in
 /// `shape/tests.rs`). So they are computed as the B-spline's, with its factored and vectorised
-/// stencils. What distinguishes the RK option stays: APIC through `Σ_I v_I ⊗ ∇Ψ_I` (no inertia
-/// `D_p`) and the RK's ghost layers.
+/// stencils, and APIC and MLS take its inertia `D_p = h²/3`: the same step as the cubic
+/// B-spline's, but for the RK's ghost layers.
 #[derive(Debug, Clone, Copy)]
 pub struct LatticeRk1 {
     cubic: BSpline,
@@ -259,8 +259,11 @@ impl<const D: usize> ShapeFunction<D> for LatticeRk1 {
         3
     }
 
-    fn apic_inertia(&self, _cell_size: f64) -> Option<f64> {
-        None
+    /// The cubic B-spline's `h²/3`: APIC and MLS transfer the affine velocities as they do for
+    /// the cubic B-spline, and so conserve angular momentum (the velocity gradient in its place,
+    /// as a general RK function has it, loses 4e-3 of a spinning block's in 100 steps).
+    fn apic_inertia(&self, cell_size: f64) -> Option<f64> {
+        ShapeFunction::<D>::apic_inertia(&self.cubic, cell_size)
     }
 
     fn reproduction_order(&self) -> u32 {

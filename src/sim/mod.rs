@@ -121,9 +121,9 @@ pub struct Momenta<const D: usize> {
     /// `Σ m_p v_p`.
     pub linear: Vector<D>,
     /// `Σ m_p x_p × v_p` about the origin, as a 3D vector (in 2D only its third component is
-    /// not zero), plus, under APIC and MLS with a B-spline, the angular momentum the particles'
-    /// affine velocities carry (Jiang et al. 2015): `Σ m_p d ε : C_p` with the weights'
-    /// inertia `D_p = d I` (`d = h²/4` quadratic, `h²/3` cubic), that is
+    /// not zero), plus, under APIC and MLS with a B-spline or RK1 with ã = 2, the angular momentum the
+    /// particles' affine velocities carry (Jiang et al. 2015): `Σ m_p d ε : C_p` with the
+    /// weights' inertia `D_p = d I` (`d = h²/4` quadratic, `h²/3` cubic and RK1 with ã = 2), that is
     /// `m d (C_zy − C_yz, C_xz − C_zx, C_yx − C_xy)`. That total is what the transfers
     /// conserve. With shape functions whose inertia is not a multiple of the identity (linear
     /// hats, RK) `C_p` is the velocity gradient and its part is left out.

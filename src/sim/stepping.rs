@@ -164,9 +164,9 @@ impl<const D: usize> Sim<D> {
             if self.shape.apic_inertia(self.grid.cell_size).is_none() {
                 return Err(Error::new(
                     ErrorKind::Unsupported,
-                    "the MLS transfer needs the quadratic or cubic B-spline shape function (a \
-                     constant APIC inertia); use the APIC or PIC/FLIP transfer with other shape \
-                     functions",
+                    "the MLS transfer needs the quadratic or cubic B-spline shape function, or \
+                     RK1 with support 2 (a constant APIC inertia); use the APIC or PIC/FLIP \
+                     transfer with other shape functions",
                 ));
             }
             if self.vc.is_some() {
