@@ -135,6 +135,23 @@ impl Section {
     }
 }
 
+/// Writes one 3D run's picture as the section through its first layer of particles along y:
+/// next to a symmetry plane y = 0, the profile of a half or quarter model.
+pub fn write_symmetry_section(
+    sim: &Sim<3>,
+    field: &str,
+    title: &str,
+    path: &Path,
+) -> Result<(), String> {
+    let first = sim
+        .particles()
+        .position
+        .iter()
+        .map(|x| x[1])
+        .fold(f64::INFINITY, f64::min);
+    write_panels(&[(sim, title.to_string())], field, title, path, Some(first))
+}
+
 /// Writes the pictures of several runs of one scene side by side, each under its label, on one
 /// colour scale and the same axes, so that their fields compare at a glance. In 3D only the
 /// particles of the section `y = section` are drawn ([`Section`]; the middle of the bodies by

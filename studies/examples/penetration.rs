@@ -26,7 +26,7 @@
 
 use rkmpm::io::vtk::VtkSeries;
 use rkmpm::{Integration, Shape, Sim};
-use rkmpm_runner::snapshot::write_panels;
+use rkmpm_runner::snapshot::{write_panels, write_symmetry_section};
 use rkmpm_studies::scenes::{recht_ipson_fit, Penetration, PenetrationResult};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -563,18 +563,6 @@ fn quarter_snapshot(
     title: &str,
     path: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let first = sim
-        .particles()
-        .position
-        .iter()
-        .map(|x| x[1])
-        .fold(f64::INFINITY, f64::min);
-    write_panels(
-        &[(sim, title.to_string())],
-        "damage",
-        title,
-        path,
-        Some(first),
-    )?;
+    write_symmetry_section(sim, "damage", title, path)?;
     Ok(())
 }

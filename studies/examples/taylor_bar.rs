@@ -8,7 +8,7 @@
 //! runs 4 cells across the radius only).
 
 use rkmpm::io::vtk::VtkSeries;
-use rkmpm_runner::snapshot::write_panels;
+use rkmpm_runner::snapshot::write_symmetry_section;
 use rkmpm_studies::scenes::{TaylorBar, TaylorCase, TaylorResult};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -97,18 +97,6 @@ fn snapshot(
     title: &str,
     path: &Path,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let first = sim
-        .particles()
-        .position
-        .iter()
-        .map(|x| x[1])
-        .fold(f64::INFINITY, f64::min);
-    write_panels(
-        &[(sim, title.to_string())],
-        "plastic_strain",
-        title,
-        path,
-        Some(first),
-    )?;
+    write_symmetry_section(sim, "plastic_strain", title, path)?;
     Ok(())
 }
