@@ -420,10 +420,17 @@ fn patch_test_uniform_stress_stays_uniform_with_vc() {
         let f = Matrix::<D>::identity() + eps;
         let s3 = le.cauchy_stress(&crate::material::embed3(&f));
         let sigma: Matrix<D> = crate::material::block(&s3);
+        // The particles are taken as they are now, deformed by `F` and filling the box that the
+        // boundary points enclose: their current volumes `J V_0` are the lattice's, so that the
+        // surface and the particles agree on the divergence theorem of every linear field
+        // (`Σ_b x_b ⊗ n_b a_b = Σ_p V_p 1`). A correction that keeps the gradients of linear
+        // fields exact (and so angular momentum) cannot meet the equalities otherwise.
         let ps = &mut sim.particles;
+        let j = crate::determinant(&f);
         for p in 0..ps.len() {
             ps.deformation_gradient[p] = f;
             ps.stress[p] = sigma;
+            ps.reference_volume[p] /= j;
         }
         // Traction t = σ n on every boundary point.
         let b = sim.boundary.clone();
