@@ -90,7 +90,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         support: 3.0,
     };
     let sim = block::<D>(m, Shape::BSpline2);
-    let (grid, ps) = (sim.grid().clone(), sim.particles().clone());
+    let (grid, ps) = (sim.grid().clone(), sim.particles());
     let dt = sim.stable_dt(0.3).unwrap();
     let mut g = c.benchmark_group(format!("{dim} ({} particles)", ps.len()));
     g.sample_size(10)

@@ -2,8 +2,10 @@
 //!
 //! The step keeps the storage sorted by grid block ([`Particles::permute`]), so a particle's
 //! place in these arrays (its *slot*) changes; its *id*, the index it was added with, does
-//! not. What the API hands out is in id order: [`Particles::write_field`], the C API's arrays,
-//! the VTK files, the body-force callback's arrays and the particles named in error messages.
+//! not. What the API hands out is in id order, and only that: `Sim::particles` (a copy in id
+//! order), [`Particles::write_field`], the C API's arrays, the VTK files, the pictures, the
+//! body-force callback's arrays and the particles named in error messages. The storage order is
+//! the engine's own: a caller cannot pair a field with positions in two different orders.
 
 use crate::material::History;
 use crate::{Matrix, Vector};
@@ -204,6 +206,16 @@ impl<const D: usize> Particles<D> {
             slots[id as usize] = p;
         }
         slots
+    }
+
+    /// A copy in id order: slot `i` holds particle `i` (and `id[i] == i`).
+    pub(crate) fn in_id_order_copy(&self) -> Particles<D> {
+        let mut copy = self.clone();
+        if !self.in_id_order() {
+            let order: Vec<u32> = self.slots().iter().map(|&p| p as u32).collect();
+            copy.permute(&order, &mut SpareArrays::default());
+        }
+        copy
     }
 
     /// Whether every particle is in the slot of its id (nothing sorted yet).

@@ -340,11 +340,11 @@ fn rejected_vc_step_under_contact_then_vc_off() {
         Some(&[Vector::<2>::new(0.0, 100.0); 64]),
     )
     .unwrap();
-    let before = sim.particles().clone();
+    let before = sim.particles();
     let dt = sim.stable_dt(0.3).unwrap();
     assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
     sim.set_integration(Integration::MaterialPoint).unwrap();
     assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
-    assert_eq!(sim.particles(), &before);
+    assert_eq!(sim.particles(), before);
     assert_eq!(sim.steps(), 0);
 }

@@ -65,7 +65,7 @@ fn adaptive_steps_land_on_the_end_time_and_keep_the_last_good_state() {
     );
 
     // Invalid arguments change nothing.
-    let before = sim.particles().clone();
+    let before = sim.particles();
     for (d, c) in [
         (-1.0, 0.4),
         (0.0, 0.4),
@@ -76,7 +76,7 @@ fn adaptive_steps_land_on_the_end_time_and_keep_the_last_good_state() {
         let e = sim.advance(d, c).unwrap_err();
         assert_eq!(e.kind, ErrorKind::InvalidArgument, "{d} {c}: {e}");
     }
-    assert!(sim.particles() == &before && sim.steps() == taken);
+    assert!(sim.particles() == before && sim.steps() == taken);
 
     // A body force that fails at its fifth call: four steps stand, the fifth is rolled back.
     let mut failing = build();
@@ -120,12 +120,12 @@ fn a_grid_too_large_for_memory_is_refused() {
     let m = sim.add_material(Material::neo_hookean(1000.0, 1e5, 0.3).unwrap());
     sim.add_particles(m, &[Vector::<2>::new(0.5, 0.2)], &[1e-6], None)
         .unwrap();
-    let before = sim.particles().clone();
+    let before = sim.particles();
     let dt = sim.stable_dt(0.3).unwrap();
     let e = sim.step(dt).unwrap_err();
     assert_eq!(e.kind, ErrorKind::OutOfMemory, "{e}");
     assert!(e.message.contains("GiB"), "{}", e.message);
-    assert!(sim.particles() == &before && sim.steps() == 0 && sim.time() == 0.0);
+    assert!(sim.particles() == before && sim.steps() == 0 && sim.time() == 0.0);
 }
 
 /// A soft block (E = 1e4) resting on a stiff one (E = 1e10): a stiffness ratio of 10^6, run at
@@ -207,12 +207,12 @@ fn a_very_fast_body_flies_exactly_and_stops_at_the_grid_edge() {
     );
     let mut refused = None;
     for k in 0..1000 {
-        let before = sim.particles().clone();
+        let before = sim.particles();
         match sim.step(dt) {
             Ok(()) => {}
             Err(e) => {
                 assert_eq!(e.kind, ErrorKind::OutsideGrid, "{e}");
-                assert!(sim.particles() == &before, "a refused step keeps the state");
+                assert!(sim.particles() == before, "a refused step keeps the state");
                 refused = Some(k);
                 break;
             }
@@ -275,14 +275,14 @@ fn particles_packed_against_a_wall() {
             let dt = sim.stable_dt(0.3).unwrap();
             let mut failed = None;
             for step in 0..200 {
-                let before = sim.particles().clone();
+                let before = sim.particles();
                 if let Err(e) = sim.step(dt) {
                     assert!(
                         shape == Shape::Linear,
                         "{shape:?} {wall:?} step {step}: {e}"
                     );
                     assert_eq!(e.kind, ErrorKind::InvertedParticle, "{e}");
-                    assert!(sim.particles() == &before && sim.steps() == step);
+                    assert!(sim.particles() == before && sim.steps() == step);
                     failed = Some(step);
                     break;
                 }

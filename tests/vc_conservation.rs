@@ -4,7 +4,7 @@
 //! stays symmetric.
 
 use rkmpm::UniformRng;
-use rkmpm::{Integration, Material, Shape, Sim, Transfer};
+use rkmpm::{Integration, Material, Shape, Side, Sim, Transfer, Wall};
 
 type V<const D: usize> = nalgebra::SVector<f64, D>;
 
@@ -134,11 +134,26 @@ fn vc_conserves_linear_momentum_3d_over_1000_steps() {
     conserves_momentum::<3>(1000);
 }
 
-/// A block dropped straight down onto a friction floor, its particles (jittered) mirror images
-/// of each other about the node plane x = 1/2: the largest mirror mismatch of positions
-/// (`x_p + x_p' − 1`, `y_p − y_p'`) after the impact, relative to the block's size.
-fn mirror_mismatch<const D: usize>(shape: Shape, order: Option<u32>, transfer: Transfer) -> f64 {
-    mirror_mismatch_of_drop::<D>(shape, order, transfer, Drop::STUDY)
+/// A block dropped straight down onto a floor of the kind `wall`, its particles (jittered)
+/// mirror images of each other about the node plane x = 1/2: the largest mirror mismatch of
+/// positions (`x_p + x_p' − 1`, `y_p − y_p'`) after the impact, relative to the block's size.
+fn mirror_mismatch<const D: usize>(
+    shape: Shape,
+    order: Option<u32>,
+    transfer: Transfer,
+    wall: Wall,
+    linear_fit: bool,
+) -> f64 {
+    mirror_mismatch_of_drop::<D>(
+        shape,
+        order,
+        transfer,
+        Drop {
+            wall,
+            linear_fit,
+            ..Drop::STUDY
+        },
+    )
 }
 
 /// The grid, the block and the fall of a mirror-symmetric drop.
@@ -151,6 +166,10 @@ struct Drop {
     bottom: f64,
     /// Simulated time: the fall and the impact.
     duration: f64,
+    /// The floor.
+    wall: Wall,
+    /// VC of order 1 with the particles' linear fit (`Sim::set_vc_linear_fit`).
+    linear_fit: bool,
 }
 
 impl Drop {
@@ -161,6 +180,8 @@ impl Drop {
         half: 6,
         bottom: 0.14,
         duration: 0.4,
+        wall: Wall::Friction(0.3),
+        linear_fit: false,
     };
 }
 
@@ -178,8 +199,8 @@ fn mirror_mismatch_of_drop<const D: usize>(
     if let Some(order) = order {
         sim.set_integration(Integration::Vc { order }).unwrap();
     }
-    sim.set_wall(1, rkmpm::Side::Low, rkmpm::Wall::Friction(0.3))
-        .unwrap();
+    sim.set_wall(1, Side::Low, drop.wall).unwrap();
+    sim.set_vc_linear_fit(drop.linear_fit).unwrap();
     let mut g = V::<D>::zeros();
     g[1] = -9.81;
     sim.set_gravity(g).unwrap();
@@ -238,47 +259,170 @@ fn mirror_mismatch_of_drop<const D: usize>(
     mismatch(&sim)
 }
 
-/// Issue target: a mirror-symmetric problem stays symmetric with VC, to round-off.
-#[test]
-fn vc_keeps_a_dropped_block_mirror_symmetric() {
-    let rk1 = Shape::Rk {
-        order: 1,
-        support: 2.0,
-    };
-    let rk2 = Shape::Rk {
-        order: 2,
-        support: 3.0,
-    };
-    let (apic, pic) = (Transfer::Apic, Transfer::PicFlip { flip: 0.0 });
-    // Without VC the mismatch is the round-off of the fall and the impact: 7.1e-15 measured in
-    // 2D. VC of order 1 adds nothing measurable (6.5e-15 to 9.5e-15). At order 2 the solve
-    // stops at 1e-12 of the right-hand side (or within `VC_SOLVE_ATTAINABLE` of it), and the
-    // round-off of its sums is not mirror symmetric: 6.3e-14 measured. The bounds are 10 times
-    // these; the mismatch was 5e-2 when RK2's edge lumping weighted the correction with the
-    // transfer weights instead of Ψ.
-    let cases2 = [
-        ("B-spline 2", Shape::BSpline2, None, apic, 1e-13),
-        ("B-spline 2 + VC1", Shape::BSpline2, Some(1), apic, 1e-13),
-        ("B-spline 3 + VC1", Shape::BSpline3, Some(1), apic, 1e-13),
-        ("RK1 + VC1", rk1, Some(1), apic, 1e-13),
-        ("RK2", rk2, None, pic, 1e-13),
-        ("RK2 + VC2", rk2, Some(2), pic, 1e-12),
-    ];
-    for (name, shape, order, transfer, bound) in cases2 {
-        let mismatch = mirror_mismatch::<2>(shape, order, transfer);
-        eprintln!("2D {name}: mirror mismatch {mismatch:.2e}");
-        assert!(mismatch < bound, "2D {name}: mirror mismatch {mismatch:e}");
+/// A drop: name, shape, VC order, transfer, floor, bound of the mismatch, linear fit.
+type MirrorCase<'a> = (
+    &'a str,
+    Shape,
+    Option<u32>,
+    Transfer,
+    (&'a str, Wall),
+    f64,
+    bool,
+);
+
+/// The mirror mismatch of each drop in `D` dimensions, with its run time; the cases over their
+/// bound.
+fn mirror_failures<const D: usize>(cases: &[MirrorCase]) -> Vec<String> {
+    let mut failed = Vec::new();
+    for &(name, shape, order, transfer, (floor, wall), bound, linear_fit) in cases {
+        let name = match linear_fit {
+            true => format!("{name} (linear fit)"),
+            false => name.to_string(),
+        };
+        let start = std::time::Instant::now();
+        let mismatch = mirror_mismatch::<D>(shape, order, transfer, wall, linear_fit);
+        eprintln!(
+            "{D}D {name}, {floor} floor: mirror mismatch {mismatch:.2e} ({:.1} s)",
+            start.elapsed().as_secs_f64()
+        );
+        if mismatch >= bound {
+            failed.push(format!("{D}D {name}, {floor}: {mismatch:.1e}"));
+        }
     }
-    // 3D RK2 + VC2 is left out: its system (`7^3`-node stencils, blocks of `4 × 4`) is above
-    // the assembly's size limit on this grid, and the matrix-free solve took more than 20
-    // minutes for the 0.4 s of the drop; a smaller drop is
-    // `vc2_3d_mirror_symmetry_of_a_small_drop`, which does not keep it to round-off.
-    let mismatch = mirror_mismatch::<3>(rk1, Some(1), apic);
-    eprintln!("3D RK1 + VC1: mirror mismatch {mismatch:.2e}");
-    assert!(
-        mismatch < 1e-13,
-        "3D RK1 + VC1: mirror mismatch {mismatch:e}"
-    );
+    failed
+}
+
+const RK1: Shape = Shape::Rk {
+    order: 1,
+    support: 2.0,
+};
+const RK2: Shape = Shape::Rk {
+    order: 2,
+    support: 3.0,
+};
+const APIC: Transfer = Transfer::Apic;
+const PIC: Transfer = Transfer::PicFlip { flip: 0.0 };
+const FRICTION: (&str, Wall) = ("friction", Wall::Friction(0.3));
+const SLIP: (&str, Wall) = ("slip", Wall::Slip);
+const FIXED: (&str, Wall) = ("fixed", Wall::Fixed);
+
+/// Issue target: a mirror-symmetric drop stays symmetric with VC, to round-off, 2D: every
+/// method on a friction floor, and the linear fit on a slip floor too (the fast variant; every
+/// floor for every VC1 method is `vc_keeps_a_dropped_block_mirror_symmetric_on_every_floor`).
+///
+/// Without VC the mismatch is the round-off of the fall and the impact: 7.1e-15 measured in
+/// 2D. VC of order 1 adds nothing measurable (5.9e-15 to 4.9e-14, every floor). At order 2 the
+/// solve stops at 1e-12 of the right-hand side (or within `VC_SOLVE_ATTAINABLE` of it), and
+/// the round-off of its sums is not mirror symmetric: 4.9e-14 measured. The bounds are about
+/// 10 times these. The mismatch was 5e-2 when RK2's edge lumping weighted the correction with
+/// the transfer weights instead of Ψ.
+#[test]
+fn vc_keeps_a_dropped_block_mirror_symmetric_2d() {
+    let vc1 = Some(1);
+    let failed = mirror_failures::<2>(&[
+        (
+            "B-spline 2",
+            Shape::BSpline2,
+            None,
+            APIC,
+            FRICTION,
+            1e-13,
+            false,
+        ),
+        (
+            "B-spline 2 + VC1",
+            Shape::BSpline2,
+            vc1,
+            APIC,
+            FRICTION,
+            1e-13,
+            false,
+        ),
+        (
+            "B-spline 3 + VC1",
+            Shape::BSpline3,
+            vc1,
+            APIC,
+            FRICTION,
+            1e-13,
+            false,
+        ),
+        ("RK1 + VC1", RK1, vc1, APIC, FRICTION, 1e-13, false),
+        ("RK2", RK2, None, PIC, FRICTION, 1e-13, false),
+        ("RK2 + VC2", RK2, Some(2), PIC, FRICTION, 1e-12, false),
+        (
+            "B-spline 3 + VC1",
+            Shape::BSpline3,
+            vc1,
+            APIC,
+            SLIP,
+            1e-13,
+            true,
+        ),
+        ("RK1 + VC1", RK1, vc1, APIC, SLIP, 1e-13, true),
+    ]);
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// The same in 3D with VC of order 1: RK1 with the mean fit on a friction floor, with the
+/// linear fit on a slip floor (8.3e-15 to 1.1e-14 measured, every floor, both fits). Before the
+/// order-1 solve was projected off `K`'s null space, its iterates drifted along the linear
+/// fields to 1e10 at nodes the particles barely reach, and the linear fit's drop onto a slip
+/// floor ended 3.6e-3 (RK1) and 4.8e-3 (B-spline 3) off symmetry. 3D RK2 + VC2 is left out:
+/// its system (`7^3`-node stencils, blocks of `4 × 4`) is above the assembly's size limit on
+/// this grid, and the matrix-free solve took more than 20 minutes for the 0.4 s of the drop; a
+/// smaller drop is `vc2_3d_mirror_symmetry_of_a_small_drop`.
+#[test]
+fn vc_keeps_a_dropped_block_mirror_symmetric_3d() {
+    let failed = mirror_failures::<3>(&[
+        ("RK1 + VC1", RK1, Some(1), APIC, FRICTION, 1e-13, false),
+        ("RK1 + VC1", RK1, Some(1), APIC, SLIP, 1e-13, true),
+    ]);
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// Every VC1 method on every floor with both fits, 2D and 3D (the long variant of the two
+/// tests above).
+#[test]
+#[ignore = "long: every floor and fit; the test command runs the fast variants"]
+fn vc_keeps_a_dropped_block_mirror_symmetric_on_every_floor() {
+    let vc1 = Some(1);
+    let mut cases2 = Vec::new();
+    let mut cases3 = Vec::new();
+    for floor in [FRICTION, SLIP, FIXED] {
+        cases2.push((
+            "B-spline 2 + VC1",
+            Shape::BSpline2,
+            vc1,
+            APIC,
+            floor,
+            1e-13,
+            false,
+        ));
+        for fit in [false, true] {
+            for (name, shape) in [("B-spline 3 + VC1", Shape::BSpline3), ("RK1 + VC1", RK1)] {
+                cases2.push((name, shape, vc1, APIC, floor, 1e-13, fit));
+                cases3.push((name, shape, vc1, APIC, floor, 1e-13, fit));
+            }
+        }
+    }
+    let mut failed = mirror_failures::<2>(&cases2);
+    failed.extend(mirror_failures::<3>(&cases3));
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// 2D RK2 + VC2 dropped onto a slip or a fixed floor. **Not met**: the mirror mismatch is
+/// 6.0e-3 (slip) and 7.7e-3 (fixed) at the end of the drop, against 4.9e-14 on the friction
+/// floor (`vc_keeps_a_dropped_block_mirror_symmetric_2d`). Kept to document the miss (the
+/// order-2 solve on the nodes a wall constrains is the likely place: not yet traced).
+#[test]
+#[ignore = "documents a missed target: 2D RK2 + VC2 on slip and fixed floors"]
+fn vc2_mirror_symmetry_on_slip_and_fixed_floors() {
+    let failed = mirror_failures::<2>(&[
+        ("RK2 + VC2", RK2, Some(2), PIC, SLIP, 1e-12, false),
+        ("RK2 + VC2", RK2, Some(2), PIC, FIXED, 1e-12, false),
+    ]);
+    assert!(failed.is_empty(), "{failed:?}");
 }
 
 /// 3D RK2 + VC2 on a small drop (8 cells, 8 particles across; its system on the study's
@@ -305,6 +449,8 @@ fn vc2_3d_mirror_symmetry_of_a_small_drop() {
         half: 4,
         bottom: 0.02,
         duration: 0.042,
+        wall: Wall::Friction(0.3),
+        linear_fit: false,
     };
     let pic = Transfer::PicFlip { flip: 0.0 };
     let mismatch = mirror_mismatch_of_drop::<3>(rk2, Some(2), pic, drop);
@@ -317,38 +463,45 @@ fn vc2_3d_mirror_symmetry_of_a_small_drop() {
     assert!(without < 1e-13, "3D RK2: mirror mismatch {without:e}");
 }
 
-/// Issue target: with VC and a transfer that conserves angular momentum (APIC, with the
-/// B-splines and RK1), a free body's total angular momentum, the affine part included, stays
-/// what it was to round-off.
-///
-/// **Not met**: the correction sums to zero over a particle's nodes, but its first moment
-/// `A_p = Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` does not vanish, so `Σ_I x_I ⊗ ∇̂Ψ_I ≠ I` and a
-/// symmetric stress exerts a torque `−V_p ε : (A_p σ_p)` on the body. Measured on the free
-/// block here over 100 steps, relative to the starting total: see `docs/convergence/FINDINGS.md`
-/// ("VC and angular momentum"); without VC, APIC keeps it to 2e-14
-/// (`apic_and_mls_conserve_angular_momentum_with_the_affine_part`).
-#[test]
-#[ignore = "documents a missed target: VC does not conserve angular momentum"]
-fn vc_conserves_angular_momentum() {
-    fn drift<const D: usize>(shape: Shape, order: u32, transfer: Transfer) -> f64 {
-        let mut sim = free_block::<D>(shape, order, transfer);
-        let dt = sim.stable_dt(0.3).unwrap();
-        // The first step gives the affine matrices (they start at zero).
+/// A free block's relative drift of total angular momentum (the affine part included) over 100
+/// steps, after the first (which gives the affine matrices: they start at zero).
+fn angular_drift<const D: usize>(
+    shape: Shape,
+    order: u32,
+    transfer: Transfer,
+    linear_fit: bool,
+) -> f64 {
+    let mut sim = free_block::<D>(shape, order, transfer);
+    sim.set_vc_linear_fit(linear_fit).unwrap();
+    let dt = sim.stable_dt(0.3).unwrap();
+    sim.step(dt).unwrap();
+    let start = sim.momenta().angular;
+    for _ in 0..100 {
         sim.step(dt).unwrap();
-        let start = sim.momenta().angular;
-        for _ in 0..100 {
-            sim.step(dt).unwrap();
-        }
-        (sim.momenta().angular - start).norm() / start.norm()
     }
+    (sim.momenta().angular - start).norm() / start.norm()
+}
+
+/// Issue target: with VC and a transfer that conserves angular momentum (APIC), a free body's
+/// total angular momentum stays what it was to round-off, for the shapes whose correction can
+/// take the linear fit (`Shape::vc_linear_fit`: the cubic B-spline and RK of support ≥ 2) when
+/// it is switched on (`Sim::set_vc_linear_fit`; off by default: not energy stable). The
+/// order-1 correction subtracts each particle's weighted linear fit of the node coefficients,
+/// so its first moment `Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` vanishes with its sum and a
+/// symmetric stress exerts no torque. Measured 1.7e-14 (2D) and 2.4e-14 (3D) for both. Without
+/// VC, APIC keeps it to 2e-14 (`apic_and_mls_conserve_angular_momentum_with_the_affine_part`).
+#[test]
+fn vc_with_the_linear_fit_conserves_angular_momentum() {
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
     let mut failed = Vec::new();
-    for (name, shape, order, transfer) in methods() {
-        if transfer != Transfer::Apic {
-            continue;
-        }
+    for (name, shape) in [("B-spline 3 + VC1", Shape::BSpline3), ("RK1 + VC1", rk1)] {
+        assert!(shape.vc_linear_fit(), "{name}");
         let (d2, d3) = (
-            drift::<2>(shape, order, transfer),
-            drift::<3>(shape, order, transfer),
+            angular_drift::<2>(shape, 1, Transfer::Apic, true),
+            angular_drift::<3>(shape, 1, Transfer::Apic, true),
         );
         eprintln!("{name}: 2D {d2:.2e}, 3D {d3:.2e}");
         if d2.max(d3) > 1e-12 {
@@ -356,4 +509,23 @@ fn vc_conserves_angular_momentum() {
         }
     }
     assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// The quadratic B-spline's support has two nodes per axis where a particle sits at a cell's
+/// middle, too few for a linear fit (the fit's system gains null modes and the solve is ill
+/// posed), so its correction takes the weighted mean only, even with the linear fit switched
+/// on (as every shape does by default): linear momentum is conserved
+/// (`vc_conserves_linear_momentum_2d`) but not angular momentum. Measured 1.6e-4 (2D) and
+/// 1.2e-4 (3D) over 100 steps: what a user of B-spline 2 + VC1 gets, stated in METHOD.md
+/// section 3. The bound is 100 times below, so that the test fails if the statement becomes
+/// false.
+#[test]
+fn vc_with_the_mean_fit_does_not_conserve_angular_momentum() {
+    assert!(!Shape::BSpline2.vc_linear_fit());
+    let (d2, d3) = (
+        angular_drift::<2>(Shape::BSpline2, 1, Transfer::Apic, true),
+        angular_drift::<3>(Shape::BSpline2, 1, Transfer::Apic, true),
+    );
+    eprintln!("B-spline 2 + VC1: 2D {d2:.2e}, 3D {d3:.2e}");
+    assert!(d2.min(d3) > 1e-6, "2D {d2:e}, 3D {d3:e}");
 }

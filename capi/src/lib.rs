@@ -72,7 +72,8 @@ pub const RKMPM_SCHEME_MUSL: RkmpmScheme = 1;
 /// (`rkmpm_sim_set_vtk_format`).
 pub type RkmpmVtkFormat = u32;
 /// Raw little-endian bytes appended after the XML, as ParaView writes them (the default): exact
-/// values, about a third of the text's size.
+/// values; 0.4 to 0.6 of the text's size for moving bodies, larger than the text for bodies at
+/// rest (the text writes a zero in three characters).
 pub const RKMPM_VTK_BINARY: RkmpmVtkFormat = 0;
 /// Numbers as text, each the shortest decimal that reads back to the same value.
 pub const RKMPM_VTK_ASCII: RkmpmVtkFormat = 1;
@@ -1148,12 +1149,13 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
         }
         let before = with_sim!(&s.sim, m => m.steps());
         let (progress, user) = (s.progress, s.progress_data);
-        let mut observe = |p: rkmpm::sim::Progress| match progress {
+        let observe = |p: rkmpm::sim::Progress| match progress {
             // SAFETY: the caller promised the callback stays callable with its user data.
             Some(f) => unsafe { f(user, p.steps, p.time, p.end, p.dt) == 0 },
             None => true,
         };
-        let result = with_sim!(&mut s.sim, m => m.advance_observed(duration, cfl, &mut observe));
+        let result =
+            with_sim!(&mut s.sim, m => m.advance_observed(duration, cfl, &mut |_, p| observe(p)));
         if !out_steps.is_null() {
             // SAFETY: checked non-NULL and aligned; the caller promises it is writable.
             unsafe { out_steps.write(with_sim!(&s.sim, m => m.steps()) - before) };
@@ -1370,7 +1372,7 @@ pub unsafe extern "C" fn rkmpm_sim_particle_count(sim: *const RkmpmSim) -> usize
         return 0;
     }
     // SAFETY: non-NULL and aligned (checked); a live handle by this function's `# Safety`.
-    with_sim!(unsafe { &(*sim).sim }, m => m.particles().len())
+    with_sim!(unsafe { &(*sim).sim }, m => m.particle_count())
 }
 
 fn field_from(field: RkmpmField) -> Result<Field, Failure> {
@@ -1391,7 +1393,7 @@ pub unsafe extern "C" fn rkmpm_sim_field_len(
         // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
         let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
-        let n = with_sim!(&s.sim, m => f.components(m.grid().cells.len()) * m.particles().len());
+        let n = with_sim!(&s.sim, m => f.components(m.grid().cells.len()) * m.particle_count());
         // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
         unsafe { write_out("out_len", out_len, n) }
     })
@@ -1418,7 +1420,7 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
         let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
         with_sim!(&s.sim, m => {
-            let need = f.components(m.grid().cells.len()) * m.particles().len();
+            let need = f.components(m.grid().cells.len()) * m.particle_count();
             if len < need {
                 return Err(Failure::new(
                     RKMPM_ERR_BUFFER_TOO_SMALL,
@@ -1430,7 +1432,7 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
                 // SAFETY: non-NULL (checked); `out` holds `len >= need` values (checked above,
                 // and this function's `# Safety`).
                 let out = unsafe { std::slice::from_raw_parts_mut(out, need) };
-                m.particles().write_field(f, out);
+                m.write_field(f, out);
             }
         });
         Ok(())

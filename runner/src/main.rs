@@ -44,11 +44,9 @@ enum Command {
     /// Run a scene: build it, step it to its end time with adaptive steps, write VTK frames
     /// (<out>/<output>_NNNNN.vtu and <out>/<output>.pvd) and print a summary.
     Run(RunArgs),
-    /// Read and build a scene without stepping it; print what it holds.
-    Check {
-        /// A scene file (.toml) or the name of a bundled scene.
-        scene: String,
-    },
+    /// Read and build a scene without stepping it, with the overrides `run` takes; print what
+    /// it holds and refuse what `run` would refuse.
+    Check(RunArgs),
     /// List the bundled scenes.
     List,
     /// Print a bundled scene's TOML, to start a scene file of your own.
@@ -108,7 +106,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command.unwrap_or(Command::Run(cli.run)) {
         Command::Run(args) => run(args),
-        Command::Check { scene } => check(&scene),
+        Command::Check(args) => check(&args),
         Command::List => {
             for (name, text) in BUNDLED {
                 let title = Scene::from_toml(text, name)
@@ -156,8 +154,8 @@ fn load(scene: &str) -> Result<Scene, String> {
     Scene::load(scene).map_err(|e| e.message)
 }
 
-fn check(scene: &str) -> Result<(), String> {
-    let s = load(scene)?;
+fn check(args: &RunArgs) -> Result<(), String> {
+    let s = scene_of(args)?;
     let (sim, other) = validate(&s)?;
     match &sim {
         SceneSim::D2(m) => describe(&s, m),
@@ -196,6 +194,28 @@ fn validate(scene: &Scene) -> Result<(SceneSim, Option<(Scene, SceneSim)>), Stri
         Ok(sim)
     };
     let sim = checked(scene, "")?;
+    // The frames' count and size, and a picture of a field the materials have.
+    let carries = |f: rkmpm::particles::Field| match &sim {
+        SceneSim::D2(m) => m.carries(f),
+        SceneSim::D3(m) => m.carries(f),
+    };
+    for f in [
+        rkmpm::particles::Field::PlasticStrain,
+        rkmpm::particles::Field::Damage,
+    ] {
+        if scene.run.png.as_deref() == Some(f.name()) && !carries(f) {
+            return Err(format!(
+                "png = {:?}: no material of this scene has {} (every particle's would be 0); \
+                 choose another field",
+                f.name(),
+                f.name().replace('_', " ")
+            ));
+        }
+    }
+    match &sim {
+        SceneSim::D2(m) => check_output(scene, m),
+        SceneSim::D3(m) => check_output(scene, m),
+    }?;
     if let Some(y) = scene.run.section {
         match &sim {
             SceneSim::D2(_) => {
@@ -245,7 +265,7 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
             .collect::<Vec<_>>()
             .join(" x "),
         g.cell_size,
-        sim.particles().len(),
+        sim.particle_count(),
         sim.materials().len(),
         if sim.materials().len() == 1 { "" } else { "s" },
         method(sim),
@@ -256,7 +276,8 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
     );
 }
 
-fn run(args: RunArgs) -> Result<(), String> {
+/// The scene `args` names (the default one without a name), with the overrides it gives.
+fn scene_of(args: &RunArgs) -> Result<Scene, String> {
     let name = args.scene.clone().unwrap_or_else(|| "disks".into());
     let mut scene = load(&name)?;
     if let Some(t) = args.end_time {
@@ -280,6 +301,11 @@ fn run(args: RunArgs) -> Result<(), String> {
     if args.section.is_some() {
         scene.run.section = args.section;
     }
+    Ok(scene)
+}
+
+fn run(args: RunArgs) -> Result<(), String> {
+    let scene = scene_of(&args)?;
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -310,7 +336,25 @@ fn run_scenes<const D: usize>(
     other: Option<(&Scene, &mut Sim<D>)>,
     args: &RunArgs,
 ) -> Result<(), String> {
-    run_scene(scene, sim, args)?;
+    let picture = |runs: &[(&Sim<D>, String)]| -> Result<(), String> {
+        if let Some(field) = &scene.run.png {
+            let path = args.out.join(format!("{}.png", scene.run.output));
+            rkmpm_runner::snapshot::write_panels(
+                runs,
+                field,
+                &scene.title,
+                &path,
+                scene.run.section,
+            )?;
+            println!("picture: {} (coloured by {field})", path.display());
+        }
+        Ok(())
+    };
+    if let Err(e) = run_scene(scene, sim, args) {
+        // The last good state's picture, then why the run stopped.
+        picture(&[(&*sim, method(sim))])?;
+        return Err(e);
+    }
     let other = match other {
         Some((s, o)) => {
             println!("\ncompared with the [compare] options:");
@@ -319,15 +363,11 @@ fn run_scenes<const D: usize>(
         }
         None => None,
     };
-    if let Some(field) = &scene.run.png {
-        let path = args.out.join(format!("{}.png", scene.run.output));
-        let mut runs = vec![(&*sim, method(sim))];
-        if let Some(o) = &other {
-            runs.push((&**o, method(o)));
-        }
-        rkmpm_runner::snapshot::write_panels(&runs, field, &scene.title, &path, scene.run.section)?;
-        println!("picture: {} (coloured by {field})", path.display());
+    let mut runs = vec![(&*sim, method(sim))];
+    if let Some(o) = &other {
+        runs.push((&**o, method(o)));
     }
+    picture(&runs)?;
     Ok(())
 }
 
@@ -352,7 +392,45 @@ fn method<const D: usize>(sim: &Sim<D>) -> String {
     format!("{shape}, {integration}, {transfer}")
 }
 
-/// Steps to the end time in chunks of adaptive steps, writing frames and updating the bar.
+/// At most this many frames a run (a series ParaView still opens).
+const MAX_FRAMES: usize = 10_000;
+/// At most this many bytes of frames a run, estimated from the first frame before the run.
+const MAX_OUTPUT_BYTES: f64 = 10.0 * (1u64 << 30) as f64;
+
+/// Refuses, before a step is taken, a run whose frames would be more than [`MAX_FRAMES`] or
+/// fill more than [`MAX_OUTPUT_BYTES`] (the frames of a run all have the particles' count, and
+/// a binary frame its size; a text frame is estimated from the first one).
+fn check_output<const D: usize>(scene: &Scene, sim: &Sim<D>) -> Result<(), String> {
+    let frames = scene.run.frames;
+    if frames > MAX_FRAMES {
+        return Err(format!(
+            "run.frames = {frames}: at most {MAX_FRAMES} frames a run; choose fewer (run.frames, \
+             --frames)"
+        ));
+    }
+    if frames == 0 {
+        return Ok(());
+    }
+    let one = rkmpm::io::vtk::particles_vtu(sim, scene.run.vtk).len() as f64;
+    let total = one * (frames + 1) as f64;
+    if total > MAX_OUTPUT_BYTES {
+        return Err(format!(
+            "run.frames = {frames}: {} frames of {:.4} MiB each would write about {:.4} GiB, \
+             above the bound of {:.4} GiB; choose at most {} frames (run.frames, --frames)",
+            frames + 1,
+            one / (1u64 << 20) as f64,
+            total / (1u64 << 30) as f64,
+            MAX_OUTPUT_BYTES / (1u64 << 30) as f64,
+            (MAX_OUTPUT_BYTES / one) as usize - 1
+        ));
+    }
+    Ok(())
+}
+
+/// Steps to the end time with adaptive steps, writing the frames at the steps the run takes
+/// anyway (frame `k` of `n` at the first step that reaches `k/n` of the end time), so that the
+/// number of frames changes nothing of the physics. When a step is refused, the last good
+/// state is written as a frame and summarised before the error is returned.
 fn run_scene<const D: usize>(
     scene: &Scene,
     sim: &mut Sim<D>,
@@ -363,20 +441,10 @@ fn run_scene<const D: usize>(
     let end = run.end_time;
     let mut series = VtkSeries::new(args.out.join(&run.output));
     series.set_format(run.vtk);
-    // Progress is updated once per chunk; a frame is written every `per_frame` chunks.
-    let per_frame = if run.frames == 0 {
-        1
-    } else {
-        100usize.div_ceil(run.frames)
-    };
-    let chunks = if run.frames == 0 {
-        100
-    } else {
-        run.frames * per_frame
-    };
     let interactive = !args.quiet && std::io::stderr().is_terminal();
+    // The bar counts thousandths of the end time.
     let bar = if interactive {
-        let bar = ProgressBar::new(chunks as u64);
+        let bar = ProgressBar::new(1000);
         bar.set_style(
             ProgressStyle::with_template(
                 "{bar:30.cyan/blue} {percent:>3}%  {msg}  [{elapsed_precise} elapsed, {eta_precise} left]",
@@ -390,54 +458,72 @@ fn run_scene<const D: usize>(
     let (p0, e0) = (sim.momenta(), sim.energies());
     // The summary tells where the energy went (one more pass over the particles per step).
     sim.set_energy_accounting(true);
-    let n = sim.particles().len() as f64;
+    let n = sim.particle_count() as f64;
     let start = Instant::now();
-    let frame = |series: &mut VtkSeries, sim: &Sim<D>| {
-        series
-            .write_frame(sim)
-            .map_err(|e| format!("writing a frame: {}", e.message))
-    };
-    if run.frames > 0 {
-        frame(&mut series, sim)?;
-    }
-    for k in 1..=chunks {
-        let target = end * k as f64 / chunks as f64;
-        if target > sim.time() {
-            sim.advance(target - sim.time(), run.cfl).map_err(|e| {
-                bar.abandon();
-                format!(
-                    "the run stopped after step {} at t = {:e} s (end time {end:e} s): {}",
-                    sim.steps(),
-                    sim.time(),
-                    e.message
-                )
-            })?;
+    let frames = run.frames;
+    let mut written: Result<(), String> = Ok(());
+    let mut write = |series: &mut VtkSeries, sim: &Sim<D>| {
+        if let Err(e) = series.write_frame(sim) {
+            written = Err(format!("writing a frame: {}", e.message));
         }
-        let wall = start.elapsed().as_secs_f64();
-        let rate = n * sim.steps() as f64 / wall.max(1e-9);
-        bar.set_message(format!(
-            "step {}  t = {:.4e} of {:.4e} s  {:.2e} particle-steps/s",
-            sim.steps(),
-            sim.time(),
-            end,
-            rate
-        ));
-        bar.set_position(k as u64);
-        if run.frames > 0 && k % per_frame == 0 {
-            frame(&mut series, sim)?;
+    };
+    if frames > 0 {
+        write(&mut series, sim);
+    }
+    // Frame `k`'s time; the last one the end time itself, where the run lands exactly.
+    let due = |k: usize| match k == frames {
+        true => end,
+        false => end * k as f64 / frames as f64,
+    };
+    let mut next = 1;
+    let mut shown = 0;
+    let stepped = sim.advance_observed(end - sim.time(), run.cfl, &mut |sim, progress| {
+        let rate = n * sim.steps() as f64 / start.elapsed().as_secs_f64().max(1e-9);
+        let done = (1000.0 * progress.time / end) as u64;
+        if done > shown {
+            shown = done;
+            bar.set_message(format!(
+                "step {}  t = {:.4e} of {:.4e} s  {:.2e} particle-steps/s",
+                progress.steps, progress.time, end, rate
+            ));
+            bar.set_position(done.min(1000));
+        }
+        if next <= frames && progress.time >= due(next) {
+            // One frame for all the frame times this step reached.
+            while next <= frames && progress.time >= due(next) {
+                next += 1;
+            }
+            write(&mut series, sim);
             if !interactive && !args.quiet {
                 println!(
-                    "frame {:>3}/{}  step {:>6}  t = {:.4e} s  {:.2e} particle-steps/s",
-                    k / per_frame,
-                    run.frames,
+                    "frame {:>3}/{frames}  step {:>6}  t = {:.4e} s  {:.2e} particle-steps/s",
+                    next - 1,
                     sim.steps(),
                     sim.time(),
                     rate
                 );
             }
         }
-    }
+        true
+    });
     bar.finish_and_clear();
+    written?;
+    if let Err(e) = stepped {
+        // The last good state, to look at: a frame (even without frames) and the summary.
+        let _ = series.write_frame(sim);
+        summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
+        // The step's own reason; the run's numbers are given here, to 4 significant digits.
+        let reason = match e.message.split_once(" (advancing from t = ") {
+            Some((reason, _)) => reason,
+            None => &e.message,
+        };
+        return Err(format!(
+            "the run stopped at step {} at t = {:.3e} s of {:.3e} s: {reason}",
+            sim.steps(),
+            sim.time(),
+            end,
+        ));
+    }
     summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
     Ok(())
 }
@@ -566,7 +652,7 @@ fn bar<const D: usize>(out: &Path) -> Result<(), String> {
     let mut sim = bar.build::<D>().map_err(|e| e.to_string())?;
     println!(
         "scene: axial vibrating bar in {D}D, {} particles, {} cells along the bar",
-        sim.particles().len(),
+        sim.particle_count(),
         bar.cells_along
     );
     let start = Instant::now();

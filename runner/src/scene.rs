@@ -781,15 +781,16 @@ mod tests {
         assert!(scene.build().is_ok(), "clipped to the grid");
     }
 
-    /// The default scene compares the seed's method with the plain B-spline: `[compare]`
-    /// replaces the options whole and keeps the rest of the scene.
+    /// The default scene compares the seed's method with the same shape functions without VC:
+    /// `[compare]` replaces the options whole and keeps the rest of the scene.
     #[test]
     fn the_comparison_takes_the_compare_options_and_nothing_else() {
         let scene = Scene::from_toml(BUNDLED[0].1, "disks").unwrap();
         assert_eq!(scene.options.shape, ShapeKind::Rk);
         assert_eq!(scene.options.integration, IntegrationKind::Vc);
         let other = scene.comparison().expect("disks has a [compare] table");
-        assert_eq!(other.options.shape, ShapeKind::Bspline2);
+        assert_eq!(other.options.shape, ShapeKind::Rk);
+        assert_eq!(other.options.rk_support, scene.options.rk_support);
         assert_eq!(other.options.integration, IntegrationKind::MaterialPoint);
         assert!(other.compare.is_none());
         assert_eq!(other.bodies.len(), scene.bodies.len());

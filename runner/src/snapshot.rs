@@ -24,10 +24,12 @@ pub const FIELDS: [&str; 10] = [
     "material",
 ];
 
-/// One value per particle: the magnitude of vectors, the von Mises stress, `det F`.
-fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String), String> {
+/// One value per particle, in id order (as `Sim::field` gives them): the magnitude of vectors,
+/// the von Mises stress (with the out-of-plane stress of plane strain in 2D), `det F`. Refuses a
+/// field no material of the run has (plastic strain, damage) rather than draw zeros.
+pub fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String), String> {
     if name == "material" {
-        let m = &sim.particles().material;
+        let m = sim.particles().material;
         return Ok((m.iter().map(|&k| k as f64).collect(), "material id".into()));
     }
     let field = Field::ALL
@@ -35,6 +37,13 @@ fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String)
         .copied()
         .find(|f| f.name() == name && *f != Field::Position && *f != Field::ReferencePosition)
         .ok_or_else(|| format!("--png {name}: choose one of {}", FIELDS.join(", ")))?;
+    if !sim.carries(field) {
+        return Err(format!(
+            "--png {name}: no material of this scene has {} (every particle's is 0); choose \
+             another field",
+            name.replace('_', " ")
+        ));
+    }
     let raw = sim.field(field);
     let per = field.components(D);
     let chunks = raw.chunks(per);
@@ -50,13 +59,10 @@ fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String)
         ),
         Field::Stress => (
             chunks
-                .map(|s| {
-                    let m = rkmpm::Matrix::<D>::from_row_slice(s);
-                    let dev = m - rkmpm::Matrix::<D>::identity() * (m.trace() / D as f64);
-                    (1.5 * dev.norm_squared()).sqrt()
-                })
+                .zip(sim.field(Field::Pressure))
+                .map(|(s, p)| von_mises::<D>(s, p))
                 .collect(),
-            "von Mises stress, in-plane (Pa)".into(),
+            "von Mises stress (Pa)".into(),
         ),
         Field::DeformationGradient => (
             chunks
@@ -76,6 +82,105 @@ fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String)
             (raw, format!("{}{unit}", name.replace('_', " ")))
         }
     })
+}
+
+/// The von Mises stress `√(3/2 s : s)` of the Cauchy stress `s` (row-major, `D × D`) whose
+/// pressure is `p`: in 2D the out-of-plane stress of plane strain, `σzz = −3p − σxx − σyy`,
+/// is part of the deviator.
+pub fn von_mises<const D: usize>(s: &[f64], p: f64) -> f64 {
+    let m = rkmpm::Matrix::<D>::from_row_slice(s);
+    let mut full = rkmpm::Matrix::<3>::zeros();
+    full.view_mut((0, 0), (D, D)).copy_from(&m);
+    if D == 2 {
+        full[(2, 2)] = -3.0 * p - m.trace();
+    }
+    let dev = full - rkmpm::Matrix::<3>::identity() * (full.trace() / 3.0);
+    (1.5 * dev.norm_squared()).sqrt()
+}
+
+/// The particles one panel draws (every one in 2D, the section's in 3D), in id order: their ids,
+/// positions and values.
+pub struct Drawn<const D: usize> {
+    pub id: Vec<usize>,
+    pub position: Vec<rkmpm::Vector<D>>,
+    pub value: Vec<f64>,
+}
+
+/// What a picture of `sim` coloured by `field` draws within `cut`, and the field's label.
+pub fn drawn<const D: usize>(
+    sim: &Sim<D>,
+    field: &str,
+    cut: &Section,
+) -> Result<(Drawn<D>, String), String> {
+    let (v, label) = values(sim, field)?;
+    // Positions in id order, as the values.
+    let x = sim.particles().position;
+    let id: Vec<usize> = (0..x.len()).filter(|&p| cut.holds(&x[p])).collect();
+    if id.is_empty() && !x.is_empty() {
+        let (lo, hi) = extremes(&x.iter().map(|p| p[1]).collect::<Vec<_>>());
+        return Err(format!(
+            "the picture's section y = {:e} m holds no particle (within {:.3e} m); the bodies \
+             span y from {lo:e} to {hi:e} m: choose a section there (run.section, --section)",
+            cut.at, cut.half_width
+        ));
+    }
+    Ok((
+        Drawn {
+            position: id.iter().map(|&p| x[p]).collect(),
+            value: id.iter().map(|&p| v[p]).collect(),
+            id,
+        },
+        label,
+    ))
+}
+
+/// How much a drawn field oscillates from particle to particle: `√(Σ (v_p − v̄_p)²) / √(Σ v_p²)`
+/// over the drawn particles, `v̄_p` the mean of the values within `radius` of `x_p` (itself
+/// included). A smooth field reads near 0 (a linear one exactly 0 where the neighbourhood is
+/// symmetric), particle-to-particle noise of the field's own size near 1: the pressure
+/// oscillation that material-point integration shows and VC removes. 0 for a field that is 0
+/// everywhere.
+pub fn roughness<const D: usize>(drawn: &Drawn<D>, radius: f64) -> f64 {
+    use std::collections::HashMap;
+    let cell = |x: &rkmpm::Vector<D>| -> [i64; 3] {
+        let mut c = [0; 3];
+        for k in 0..D {
+            c[k] = (x[k] / radius).floor() as i64;
+        }
+        c
+    };
+    let mut bins: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+    for (i, x) in drawn.position.iter().enumerate() {
+        bins.entry(cell(x)).or_default().push(i);
+    }
+    let (mut deviation, mut size) = (0.0, 0.0);
+    for (i, x) in drawn.position.iter().enumerate() {
+        let c = cell(x);
+        let (mut sum, mut count) = (0.0, 0usize);
+        let reach = |k: usize| if k < D { -1..=1 } else { 0..=0 };
+        for a in reach(0) {
+            for b in reach(1) {
+                for e in reach(2) {
+                    let Some(near) = bins.get(&[c[0] + a, c[1] + b, c[2] + e]) else {
+                        continue;
+                    };
+                    for &j in near {
+                        if (drawn.position[j] - x).norm() <= radius {
+                            sum += drawn.value[j];
+                            count += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let v = drawn.value[i];
+        deviation += (v - sum / count as f64).powi(2);
+        size += v * v;
+    }
+    match size > 0.0 {
+        true => (deviation / size).sqrt(),
+        false => 0.0,
+    }
 }
 
 /// Blue (low) through green to red (high).
@@ -144,9 +249,8 @@ pub fn write_symmetry_section(
     path: &Path,
 ) -> Result<(), String> {
     let first = sim
-        .particles()
-        .position
-        .iter()
+        .field(Field::Position)
+        .chunks(3)
         .map(|x| x[1])
         .fold(f64::INFINITY, f64::min);
     write_panels(&[(sim, title.to_string())], field, title, path, Some(first))
@@ -165,24 +269,20 @@ pub fn write_panels<const D: usize>(
 ) -> Result<(), String> {
     let sims: Vec<&Sim<D>> = runs.iter().map(|(s, _)| *s).collect();
     let cut = Section::of(&sims, section);
-    // Per run: the positions and values of the particles drawn.
-    let mut fields = Vec::with_capacity(runs.len());
-    let mut shown = Vec::with_capacity(runs.len());
+    // Per run: the particles drawn, their positions and values.
+    let mut panels = Vec::with_capacity(runs.len());
     for (sim, _) in runs {
-        let (v, label) = values(*sim, field)?;
-        let x = &sim.particles().position;
-        let keep: Vec<usize> = (0..x.len()).filter(|&p| cut.holds(&x[p])).collect();
-        if keep.is_empty() && !x.is_empty() {
-            let (lo, hi) = extremes(&x.iter().map(|p| p[1]).collect::<Vec<_>>());
-            return Err(format!(
-                "the picture's section y = {:e} m holds no particle (within {:.3e} m); the bodies \
-                 span y from {lo:e} to {hi:e} m: choose a section there (run.section, --section)",
-                cut.at, cut.half_width
-            ));
-        }
-        fields.push((keep.iter().map(|&p| v[p]).collect::<Vec<f64>>(), label));
-        shown.push(keep.iter().map(|&p| x[p]).collect::<Vec<_>>());
+        panels.push(drawn(*sim, field, &cut)?);
     }
+    // Each panel's roughness, over the particles within 1.5 particle spacings.
+    let rough: Vec<f64> = panels
+        .iter()
+        .map(|(d, _)| roughness(d, 3.0 * cut.half_width))
+        .collect();
+    let (fields, shown): (Vec<(Vec<f64>, String)>, Vec<Vec<rkmpm::Vector<D>>>) = panels
+        .into_iter()
+        .map(|(d, label)| ((d.value, label), d.position))
+        .unzip();
     let label = fields.first().map(|f| f.1.clone()).unwrap_or_default();
     let fail = |e: Box<dyn std::error::Error>| format!("writing {}: {e}", path.display());
     plotters::style::register_font(
@@ -199,7 +299,7 @@ pub fn write_panels<const D: usize>(
     let range = |axis: usize| {
         let (lo, hi) = runs
             .iter()
-            .flat_map(|(s, _)| s.particles().position.iter().map(move |p| p[axis]))
+            .flat_map(|(s, _)| s.field(Field::Position).into_iter().skip(axis).step_by(D))
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), c| {
                 (l.min(c), h.max(c))
             });
@@ -240,15 +340,21 @@ pub fn write_panels<const D: usize>(
     };
     let axes = ["x", "y", "z"];
     let areas = root.split_evenly((1, runs.len().max(1)));
-    for (((area, (sim, name)), (v, _)), x) in areas.iter().zip(runs).zip(&fields).zip(&shown) {
+    let panels = areas.iter().zip(runs).zip(&fields).zip(&shown).zip(&rough);
+    for ((((area, (sim, name)), (v, _)), x), &r) in panels {
+        // The roughness where it says something (not of material ids).
+        let rough = match field {
+            "material" => String::new(),
+            _ => format!(", roughness {r:.3}"),
+        };
         let mut chart = ChartBuilder::on(area)
             .caption(
                 caption.clone().map_or_else(
                     || {
                         let (l, h) = extremes(v);
-                        format!("{name}: {l:.3e} to {h:.3e}{section_note}")
+                        format!("{name}: {l:.3e} to {h:.3e}{rough}{section_note}")
                     },
-                    |c| format!("{c}{section_note}"),
+                    |c| format!("{c}{rough}{section_note}"),
                 ),
                 ("sans-serif", 16),
             )
@@ -329,8 +435,9 @@ impl ColourScale {
         if sorted.len() < 100 || discrete {
             return linear;
         }
+        // A signed field (pressure) keeps the linear scale: a log one would hide one sign.
         let positive = &sorted[sorted.partition_point(|&v| v <= 0.0)..];
-        if positive.is_empty() {
+        if positive.is_empty() || extremes.0 < 0.0 {
             return linear;
         }
         let low = positive[((positive.len() - 1) as f64 * 0.01).round() as usize];
@@ -452,6 +559,32 @@ mod tests {
             half_width: 0.0,
         };
         assert!(flat.holds(&rkmpm::Vector::<2>::new(0.3, 0.7)));
+    }
+
+    /// A constant field has no roughness, a linear one none where the neighbourhood is
+    /// symmetric and little over a whole lattice, a checkerboard of the field's own size about
+    /// 1.
+    #[test]
+    fn roughness_tells_noise_from_smooth_fields() {
+        let x: Vec<Vector<2>> = (0..400)
+            .map(|k| Vector::<2>::new((k % 20) as f64, (k / 20) as f64))
+            .collect();
+        let panel = |value: Vec<f64>| super::Drawn {
+            id: (0..400).collect(),
+            position: x.clone(),
+            value,
+        };
+        assert_eq!(super::roughness(&panel(vec![2.0; 400]), 1.5), 0.0);
+        let linear = panel(x.iter().map(|p| 100.0 + p[0] + 2.0 * p[1]).collect());
+        let r = super::roughness(&linear, 1.5);
+        assert!(r > 0.0 && r < 0.01, "{r}");
+        let checker = panel(
+            (0..400)
+                .map(|k| [1.0, -1.0][(k % 20 + k / 20) % 2])
+                .collect(),
+        );
+        let r = super::roughness(&checker, 1.5);
+        assert!(r > 0.8 && r <= 1.0, "{r}");
     }
 
     /// A body near zero with a few spikes is drawn between its percentiles; a field without a

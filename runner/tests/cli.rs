@@ -88,8 +88,9 @@ fn runs_a_bundled_scene_to_its_end() {
     std::fs::remove_dir_all(out).unwrap();
 }
 
-/// The default scene runs twice, RK + VC and then its `[compare]` options (the quadratic
-/// B-spline), and draws the two side by side: a PNG two panels wide, both summaries printed.
+/// The default scene runs twice, RK + VC and then its `[compare]` options (the same RK shape
+/// functions without VC), and draws the two side by side: a PNG two panels wide, both
+/// summaries printed.
 #[test]
 fn the_default_scene_draws_both_runs_side_by_side() {
     let out = scratch("compare");
@@ -112,7 +113,7 @@ fn the_default_scene_draws_both_runs_side_by_side() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("1 material; quadratic B-spline, material points, APIC, USL"),
+        stdout.contains("1 material; RK order 1, support 2, material points, APIC, USL"),
         "{stdout}"
     );
     assert_eq!(stdout.matches("scene: ").count(), 2, "{stdout}");
@@ -230,6 +231,117 @@ fn help_and_listing() {
     }
 }
 
+/// Frames are written at the steps the run takes anyway, so their number changes nothing of
+/// the physics: the last frame of a run with 30 frames is the file of a run with 1, byte for
+/// byte, and a run with none prints the same steps, momenta and energies.
+#[test]
+fn frames_do_not_change_the_physics() {
+    let physics = |frames: &str| {
+        let out = scratch(&format!("frames{frames}"));
+        let (ok, stdout, stderr) = rkmpm(&[
+            "run",
+            "bar",
+            "--end-time",
+            "0.1",
+            "--frames",
+            frames,
+            "--png",
+            "none",
+            "--quiet",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{stderr}");
+        let lines: Vec<String> = stdout
+            .lines()
+            .filter(|l| l.starts_with("momentum") || l.starts_with("energy"))
+            .map(String::from)
+            .chain(
+                stdout
+                    .lines()
+                    .find(|l| l.starts_with("steps: "))
+                    .map(|l| l.split(", wall").next().unwrap().to_string()),
+            )
+            .collect();
+        assert!(lines.len() >= 4, "{stdout}");
+        let last = match frames {
+            "0" => None,
+            n => Some(std::fs::read(out.join(format!("bar_{n:0>5}.vtu"))).unwrap()),
+        };
+        let _ = std::fs::remove_dir_all(out);
+        (lines, last)
+    };
+    let (none, _) = physics("0");
+    let (one, last_of_one) = physics("1");
+    let (thirty, last_of_thirty) = physics("30");
+    assert_eq!(none, thirty);
+    assert_eq!(one, thirty);
+    assert!(
+        last_of_one.unwrap() == last_of_thirty.unwrap(),
+        "the last frames differ"
+    );
+}
+
+/// Frames are bounded before a step is taken, by count and by the disk they would fill.
+#[test]
+fn too_many_frames_are_refused_up_front() {
+    let out = scratch("many");
+    let (ok, _, stderr) = rkmpm(&["check", "bar", "--frames", "100000"]);
+    assert!(!ok && stderr.contains("at most 10000 frames"), "{stderr}");
+    let (ok, _, stderr) = rkmpm(&[
+        "run",
+        "bar",
+        "--frames",
+        "100000",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok && stderr.contains("at most 10000 frames"), "{stderr}");
+    assert!(!out.exists());
+}
+
+/// A run that a refused step stops leaves its last good state to look at (a frame, the
+/// picture, the summary) and says why it stopped in plain numbers.
+#[test]
+fn a_stopped_run_leaves_its_last_good_state() {
+    let (ok, disks, _) = rkmpm(&["show", "disks"]);
+    assert!(ok);
+    let dir = scratch("stopped");
+    std::fs::create_dir_all(&dir).unwrap();
+    // The disks thrown at 40 m/s: they leave the grid within 0.02 s.
+    let text = disks
+        .replace("velocity = [0.1, 0.1]", "velocity = [40.0, 40.0]")
+        .replace("end_time = 3.0", "end_time = 0.1");
+    assert_ne!(text, disks);
+    let file = dir.join("fast.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = dir.join("out");
+    let (ok, stdout, stderr) = rkmpm(&[
+        "run",
+        file.to_str().unwrap(),
+        "--frames",
+        "0",
+        "--quiet",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!ok, "{stdout}");
+    assert!(stderr.contains("the run stopped at step "), "{stderr}");
+    // Four significant digits: `t = 1.234e-2 s of 1.000e-1 s`, and no detail of the stepping.
+    assert!(stderr.contains(" s of 1.000e-1 s: "), "{stderr}");
+    assert!(!stderr.contains("advancing from"), "{stderr}");
+    assert!(stdout.contains("energy at the end:"), "{stdout}");
+    assert!(
+        out.join("disks_00000.vtu").exists(),
+        "the last good state's frame"
+    );
+    assert!(
+        out.join("disks.png").exists(),
+        "the last good state's picture"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `check` refuses what `run` refuses, with the same message, before anything is computed:
 /// options the step does not support (also in `[compare]`) and a picture of no field.
 #[test]
@@ -253,10 +365,14 @@ fn check_refuses_what_run_refuses() {
         ),
         (
             disks.replace(
-                "shape = \"bspline2\"\ntransfer = \"apic\"",
-                "shape = \"linear\"\ntransfer = \"mls\"",
+                "shape = \"rk\"\nrk_order = 1\nrk_support = 2.0\ntransfer = \"apic\"\n\n",
+                "shape = \"linear\"\ntransfer = \"mls\"\n\n",
             ),
             "[compare]: the MLS transfer needs the quadratic or cubic B-spline",
+        ),
+        (
+            disks.replace("png = \"pressure\"", "png = \"damage\""),
+            "png = \"damage\": no material of this scene has damage",
         ),
         (
             disks.replace("png = \"pressure\"", "png = \"plastic\""),

@@ -20,28 +20,45 @@
 //! with `w_Ip = |Ψ_I(x_p)|`, so `Σ_I w_Ip (ζ_I·Q_I − μ_p) = 0` at every particle whatever `ζ` is:
 //! the corrected gradients sum to zero (linear momentum is conserved to round-off), and a node
 //! at a body's edge, with a small mass, gets a correction as small as its weights (no force
-//! floor is needed). The equalities then couple the nodes through `μ_p`:
-//! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p`, `A_I = Σ_p V_p w_Ip Q Qᵀ`,
-//! a symmetric positive semi-definite system (a weighted variance: `⟨ζ, Kζ⟩ =
-//! Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − μ_p)²`), solved by conjugate gradients preconditioned with the
-//! node blocks `A_I`, whose first iterate is the per-node correction; the iterations grow with
-//! the grid's width. `K` is assembled on the nodes once per step, and on wide grids (order 1:
-//! at least 48 nodes wide; order ≥ 2: whenever the hierarchy has a level below the nodes)
-//! preconditioned by an aggregation multigrid V-cycle instead (`node_operator`): about a
-//! dozen iterations whatever the grid at order 1, about 20–50 at order 2, where round-off lets
+//! floor is needed). At order 1, when switched on (`Sim::set_vc_linear_fit`, experimental and
+//! off by default: not energy stable on the colliding disks, docs/METHOD.md) and for the shapes
+//! with at least three nodes per axis in every support (`Shape::vc_linear_fit`: the cubic
+//! B-spline, RK of support ≥ 2), the particle subtracts its weighted linear fit instead of the
+//! mean, `w_Ip (ζ_I − μ_p − C_p u_Ip)` with
+//! `u_Ip` the node offsets in the particle's frame ([`linear_frame`]), so that the correction's
+//! first moment `Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` vanishes too and a symmetric stress exerts no
+//! torque (angular momentum conserved with APIC); linear hats and the quadratic B-spline take
+//! the mean (two nodes per axis in places: the fit would leave free values per particle).
+//! The equalities then couple the nodes through the fits:
+//! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p` (the fitted value at order 1),
+//! `A_I = Σ_p V_p w_Ip Q Qᵀ`, a symmetric positive semi-definite system (a weighted residual:
+//! `⟨ζ, Kζ⟩ = Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − fit_p)²`), solved by conjugate gradients
+//! preconditioned with the node blocks `A_I`, whose first iterate is the per-node correction;
+//! the iterations grow with the grid's width. `K` is assembled on the nodes once per step, and
+//! on wide grids (order 1: at least 48 nodes wide; order ≥ 2: whenever the hierarchy has a
+//! level below the nodes) preconditioned by an aggregation multigrid V-cycle instead
+//! (`node_operator`): about a dozen iterations whatever the grid with the mean fit, 40–110
+//! with the linear fit (80 to 160 cells), about 20–50 at order 2, where round-off lets
 //! the residual reach the tolerance only just, and a best residual within
 //! `VC_SOLVE_ATTAINABLE` of it that stops improving is accepted. `K`'s null space is the
-//! corrections that change no gradient (a polynomial of degree < n over a whole body); the
+//! corrections that change no gradient (over a whole body, a polynomial of degree < n; at
+//! order 1 the constants with the mean fit, the linear fields with the linear fit); the
 //! right-hand side's part along it is what no force-free correction can meet, `Σ_b n_b a_b` per
 //! body at order 1, zero for a closed surface. It is projected out per connected body before
-//! the solve (`Σ_b P n_b a_b − Σ_p V_p ∇P` for every polynomial P of degree < n: the surface
-//! and the particles disagreeing on P's divergence theorem). A node whose `A_I` is
+//! the solve (`Σ_b P n_b a_b − Σ_p V_p ∇P` for every null polynomial P: the surface
+//! and the particles disagreeing on P's divergence theorem; with the linear fit obliquely, in
+//! the reach-weighted inner product). At order 1 the conjugate gradients are projected too
+//! (every preconditioned residual, every product `K d` and the solution lose their part along
+//! the null space, [`NullSpace`]): without it round-off carried the iterates along the linear
+//! fields to `10^10` at nodes the particles barely reach, and a block dropped onto a slip floor
+//! lost its mirror symmetry (3.6e-3, `tests/vc_conservation.rs`). A node whose `A_I` is
 //! singular (too few particles in its support for the order) is preconditioned with its
 //! constant part only, and so corrected to order 1 ([`VcCorrection::reduced_to_first_order`]).
 //! A node that the particles barely reach while a surface point is near it has an equality the
 //! particles can meet only with a large correction on a node of almost no mass; the grid
 //! update's edge-mass floor limits its acceleration and hands the force it holds back to the
-//! whole field, so that momentum is still conserved (`crate::step::grid_update`).
+//! receiving nodes as a rigid-body acceleration (a translation and a rotation), so that linear
+//! and angular momentum are still conserved (`crate::step::grid_update`).
 //!
 //! At order 1 such a node's coefficients are also bounded (`VC_MAX_CORRECTION`): since any `ζ`
 //! keeps the gradients summing to zero, the bound costs that node's equality and nothing of
@@ -57,7 +74,7 @@ pub use boundary_points::BoundaryPoints;
 use crate::error::{Error, Result};
 use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, Stencils};
-use crate::Vector;
+use crate::{Matrix, Vector};
 use nalgebra::{DMatrix, DVector};
 use node_operator::{Multilevel, NodeOperator};
 use rayon::prelude::*;
@@ -134,8 +151,14 @@ pub struct VcCorrection<const D: usize> {
     used: Vec<bool>,
     /// Slots whose moment matrix was singular, corrected to order 1 only.
     reduced: Vec<bool>,
-    /// Per particle: the mean `μ_p` of the node corrections over its support, per direction.
-    mean: Vec<Vector<D>>,
+    /// Per particle: the mean `μ_p` of the node corrections over its support, per direction,
+    /// and at order 1 the slope `C_p` of their linear fit (zero at order ≥ 2).
+    fit: Vec<(Vector<D>, Matrix<D>)>,
+    /// Per particle at order 1: its fit's frame `(T_p, o_p)`, see [`linear_frame`].
+    frame: Vec<(Matrix<D>, Vector<D>)>,
+    /// At order 1, whether the correction subtracts the particles' linear fit (else their
+    /// mean): [`crate::options::Shape::vc_linear_fit`].
+    pub linear_fit: bool,
     /// Conjugate-gradient iterations of the last solve.
     iterations: usize,
     /// Applies the order-1 system matrix-free, as orders ≥ 2 do (to test the assembled one).
@@ -161,7 +184,9 @@ impl<const D: usize> VcCorrection<D> {
             xi: Vec::new(),
             used: Vec::new(),
             reduced: Vec::new(),
-            mean: Vec::new(),
+            fit: Vec::new(),
+            frame: Vec::new(),
+            linear_fit: false,
             iterations: 0,
             #[cfg(test)]
             matrix_free: false,
@@ -387,6 +412,38 @@ impl<const D: usize> VcCorrection<D> {
         let used = &self.used;
         let reduced = &self.reduced;
         let counted = |p: usize| body.is_none_or(|(materials, b)| materials[p] == b);
+        // At order 1, every particle's frame of the linear fit (see [`linear_frame`]).
+        let offset = |p: usize, n: usize| -> Vector<D> {
+            (grid.node_position(grid.node_multi_index(n)) - positions[p]) / h
+        };
+        let mut frame = std::mem::take(&mut self.frame);
+        frame.clear();
+        if m == 1 {
+            frame.par_extend((0..positions.len()).into_par_iter().map(|p| {
+                let (mut weight, mut first, mut second) = (0.0, Vector::zeros(), Matrix::zeros());
+                if counted(p) {
+                    stencils.for_each_shape(p, |_, s| {
+                        if s.in_support() {
+                            let (w, d) = (s.value.abs(), offset(p, s.node));
+                            weight += w;
+                            first += w * d;
+                            second += w * d * d.transpose();
+                        }
+                    });
+                }
+                linear_frame(weight, first, second)
+            }));
+        }
+        let linear_fit = m == 1 && self.linear_fit;
+        if m == 1 && !linear_fit {
+            frame
+                .iter_mut()
+                .for_each(|f| *f = (Matrix::zeros(), Vector::zeros()));
+        }
+        let frame_offset = |p: usize, n: usize| -> Vector<D> {
+            let (t, o) = &frame[p];
+            t * offset(p, n) - o
+        };
         let multilevel = assembled
             .then(|| {
                 NodeOperator::assemble(
@@ -397,13 +454,15 @@ impl<const D: usize> VcCorrection<D> {
                     volumes,
                     (moment, reduced, m),
                     q_of,
+                    frame_offset,
                     counted,
                 )
             })
             .flatten()
             .map(|fine| {
                 let cycle = force_cycle || Multilevel::<D>::pays(&fine);
-                Multilevel::new(fine, cycle, basis.exponents(), reduced)
+                let reach = linear_fit.then_some(&moment[..]);
+                Multilevel::new(fine, cycle, basis.exponents(), reduced, reach)
             });
         let operator = multilevel.as_ref().map(|m| m.fine());
         // The V-cycle, until a breakdown (below) turns to the node blocks.
@@ -429,20 +488,54 @@ impl<const D: usize> VcCorrection<D> {
                     }
                 });
         };
-        let precondition = |r: &[f64], z: &mut [f64]| match multilevel
-            .as_ref()
-            .filter(|_| with_multilevel.get())
-        {
-            Some(multilevel) => multilevel.precondition(r, z),
-            None => node_blocks(r, z),
+        // K's null space per body (the nodes that particles connect), removed from the
+        // right-hand side (see below) and from every preconditioned residual, so that round-off
+        // does not carry the iterates along it (projected conjugate gradients).
+        let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
+            if counted(p) {
+                stencils.for_each_shape(p, |_, s| {
+                    if s.in_support() {
+                        visit(nodes.slot(s.node));
+                    }
+                });
+            }
+        });
+        let exps = self.basis.exponents();
+        let degree = match m {
+            1 => linear_fit as u32,
+            _ => self.order - 1,
         };
-        let mut mean = std::mem::take(&mut self.mean);
-        mean.clear();
-        mean.resize(positions.len(), Vector::<D>::zeros());
-        // The means of ζ at the particles.
-        let means = |zeta: &[f64], mean: &mut [Vector<D>]| {
-            mean.par_iter_mut().enumerate().for_each(|(p, mu)| {
+        let null = NullSpace::new(
+            degree,
+            exps,
+            used,
+            grid,
+            nodes,
+            &body_of,
+            (m == 1).then_some(&moment[..]),
+        );
+        let project = m == 1;
+        let precondition = |r: &[f64], z: &mut [f64]| {
+            match multilevel.as_ref().filter(|_| with_multilevel.get()) {
+                Some(multilevel) => multilevel.precondition(r, z),
+                None => node_blocks(r, z),
+            }
+            if project {
+                null.remove_from_coefficients(z);
+            }
+        };
+        let mut fit = std::mem::take(&mut self.fit);
+        fit.clear();
+        fit.resize(
+            positions.len(),
+            (Vector::<D>::zeros(), Matrix::<D>::zeros()),
+        );
+        // The fits of ζ at the particles: the weighted mean `μ_p` of `ζ_J·Q_J(x_p)` and, at
+        // order 1, the slope `C_p = Σ_J w_Jp ζ_J ⊗ u_Jp` of the weighted linear fit.
+        let fits = |zeta: &[f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
+            fit.par_iter_mut().enumerate().for_each(|(p, (mu, slope))| {
                 *mu = Vector::<D>::zeros();
+                *slope = Matrix::<D>::zeros();
                 if !counted(p) {
                     return;
                 }
@@ -454,8 +547,14 @@ impl<const D: usize> VcCorrection<D> {
                     }
                     let w = s.value.abs();
                     weight += w;
-                    q_of(p, s.node, &mut q);
                     let z = &zeta[nodes.slot(s.node) * m * D..];
+                    if m == 1 {
+                        let z = Vector::<D>::from_fn(|k, _| z[k]);
+                        *mu += w * z;
+                        *slope += w * z * frame_offset(p, s.node).transpose();
+                        return;
+                    }
+                    q_of(p, s.node, &mut q);
                     for k in 0..D {
                         mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
                     }
@@ -465,13 +564,13 @@ impl<const D: usize> VcCorrection<D> {
                 }
             });
         };
-        // K ζ: assembled, or the means of ζ at the particles, then the node sums.
-        let apply = |zeta: &[f64], out: &mut [f64], mean: &mut [Vector<D>]| {
+        // K ζ: assembled, or the fits of ζ at the particles, then the node sums.
+        let product = |zeta: &[f64], out: &mut [f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
             if let Some(operator) = &operator {
                 operator.apply(zeta, out);
                 return;
             }
-            means(zeta, mean);
+            fits(zeta, fit);
             out.par_chunks_exact_mut(m * D)
                 .zip(zeta.par_chunks_exact(m * D))
                 .enumerate()
@@ -484,7 +583,7 @@ impl<const D: usize> VcCorrection<D> {
                     }
                 });
             let shared = SharedSlice::new(out);
-            let mean = &*mean;
+            let fit = &*fit;
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
                     let mut q = [0.0; MAX_BASIS];
@@ -494,22 +593,37 @@ impl<const D: usize> VcCorrection<D> {
                             continue;
                         }
                         let v = volumes[p];
+                        let (mu, slope) = &fit[p];
                         stencils.for_each_shape(p, |_, s| {
                             if !s.in_support() {
                                 return;
                             }
                             let v = v * s.value.abs();
-                            q_of(p, s.node, &mut q);
                             // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                             let o = unsafe { shared.range(nodes.slot(s.node) * m * D, m * D) };
+                            if m == 1 {
+                                let fitted = mu + slope * frame_offset(p, s.node);
+                                for k in 0..D {
+                                    o[k] -= v * fitted[k];
+                                }
+                                return;
+                            }
+                            q_of(p, s.node, &mut q);
                             for k in 0..D {
                                 for j in 0..m {
-                                    o[k * m + j] -= v * q[j] * mean[p][k];
+                                    o[k * m + j] -= v * q[j] * mu[k];
                                 }
                             }
                         });
                     }
                 });
+            }
+        };
+        // Off the null space (projected at order 1).
+        let apply = |zeta: &[f64], out: &mut [f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
+            product(zeta, out, fit);
+            if project {
+                null.remove(out);
             }
         };
         // Sums in fixed chunks, added in order: the same bits with any number of threads.
@@ -525,16 +639,11 @@ impl<const D: usize> VcCorrection<D> {
         // The part of the right-hand side along K's null space (per body, the nodes that
         // particles connect: at order 1 the sum of its surface's area normals, zero for a closed
         // surface up to round-off) is removed, so that the solve does not amplify it.
-        let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
-            if counted(p) {
-                stencils.for_each_shape(p, |_, s| {
-                    if s.in_support() {
-                        visit(nodes.slot(s.node));
-                    }
-                });
-            }
-        });
-        self.remove_null_part(grid, nodes, &body_of, &mut rhs);
+        if linear_fit {
+            null.remove(&mut rhs);
+        } else {
+            NullSpace::new(degree, exps, used, grid, nodes, &body_of, None).remove(&mut rhs);
+        }
         // A node corrected to order 1 meets its constant equality only: its other right-hand
         // sides are left out (the node blocks never read them; the assembled `K` has zero rows
         // there).
@@ -584,7 +693,7 @@ impl<const D: usize> VcCorrection<D> {
             m > 1 && best <= VC_SOLVE_ATTAINABLE * VC_SOLVE_ATTAINABLE * target
         };
         while current > target && iterations < VC_SOLVE_MAX_ITERATIONS {
-            apply(&d, &mut kd, &mut mean);
+            apply(&d, &mut kd, &mut fit);
             let dkd = dot(&d, &kd);
             if dkd.is_nan() || dkd <= 0.0 {
                 if attained(best_rz, target) {
@@ -595,7 +704,7 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 restarts += 1;
                 zeta.copy_from_slice(&best);
-                apply(&zeta, &mut kd, &mut mean);
+                apply(&zeta, &mut kd, &mut fit);
                 r.par_iter_mut()
                     .zip(&rhs)
                     .zip(&kd)
@@ -644,9 +753,12 @@ impl<const D: usize> VcCorrection<D> {
             iterations += 1;
         }
         let mut zeta = best;
+        if project {
+            null.remove_from_coefficients(&mut zeta);
+        }
         self.iterations = iterations;
         // At order 1, a node's correction bounded by `VC_MAX_CORRECTION / h` (see there); the
-        // means are taken of the bounded coefficients, so the gradients still sum to zero.
+        // fits are taken of the bounded coefficients, so the gradients still sum to zero.
         if m == 1 {
             zeta.par_chunks_exact_mut(D).for_each(|z| {
                 let size = z.iter().map(|x| x * x).sum::<f64>().sqrt() * h;
@@ -655,90 +767,11 @@ impl<const D: usize> VcCorrection<D> {
                 }
             });
         }
-        // The particle means of the solution, which the corrected gradients subtract.
-        means(&zeta, &mut mean);
-        self.mean = mean;
+        // The particle fits of the solution, which the corrected gradients subtract.
+        fits(&zeta, &mut fit);
+        self.fit = fit;
+        self.frame = frame;
         self.xi = zeta;
-    }
-
-    /// Removes from `rhs` (per slot, `m` values per direction) its projection onto `K`'s null
-    /// space: per body, the node coefficients of every global polynomial `P` of degree < n,
-    /// re-expanded about each node, `P(x_c + h (d_I + z)) = Σ_e N_Ie z^e`, `d_I = (x_I − x_c)/h`
-    /// about the body's node centroid `x_c` (binomial coefficients).
-    fn remove_null_part(
-        &self,
-        grid: &Grid<D>,
-        nodes: &GridNodes<D>,
-        body_of: &[usize],
-        rhs: &mut [f64],
-    ) {
-        let m = self.m();
-        let exps = self.basis.exponents();
-        let bodies = body_of.iter().map(|&b| b + 1).max().unwrap_or(0);
-        let h = grid.cell_size;
-        let position = |slot: usize| grid.node_position(grid.node_multi_index(nodes.active[slot]));
-        let mut centroid = vec![(0.0, Vector::<D>::zeros()); bodies];
-        for (slot, &b) in body_of.iter().enumerate() {
-            if self.used[slot] {
-                centroid[b].0 += 1.0;
-                centroid[b].1 += position(slot);
-            }
-        }
-        let binomial = |n: u32, k: u32| -> f64 {
-            (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
-        };
-        // N_I[e][f]: coefficient of z^e in the re-expansion of the monomial f.
-        let null_at = |slot: usize, out: &mut [f64]| {
-            let b = body_of[slot];
-            let d = (position(slot) - centroid[b].1 / centroid[b].0) / h;
-            for (e, ee) in exps.iter().enumerate() {
-                for (f, ff) in exps.iter().enumerate() {
-                    out[e * m + f] = if (0..D).all(|a| ee[a] <= ff[a]) {
-                        (0..D)
-                            .map(|a| binomial(ff[a], ee[a]) * d[a].powi((ff[a] - ee[a]) as i32))
-                            .product()
-                    } else {
-                        0.0
-                    };
-                }
-            }
-        };
-        // Per body: G = Σ_I N_Iᵀ N_I and t_k = Σ_I N_Iᵀ r_Ik.
-        let mut gram = vec![DMatrix::<f64>::zeros(m, m); bodies];
-        let mut t = vec![DMatrix::<f64>::zeros(m, D); bodies];
-        let mut n = vec![0.0; m * m];
-        for (slot, &b) in body_of.iter().enumerate() {
-            if !self.used[slot] {
-                continue;
-            }
-            null_at(slot, &mut n);
-            let r = &rhs[slot * m * D..(slot + 1) * m * D];
-            for f in 0..m {
-                for g in 0..m {
-                    gram[b][(f, g)] += (0..m).map(|e| n[e * m + f] * n[e * m + g]).sum::<f64>();
-                }
-                for k in 0..D {
-                    t[b][(f, k)] += (0..m).map(|e| n[e * m + f] * r[k * m + e]).sum::<f64>();
-                }
-            }
-        }
-        let alpha: Vec<Option<DMatrix<f64>>> = gram
-            .into_iter()
-            .zip(t)
-            .map(|(g, t)| g.cholesky().map(|c| c.solve(&t)))
-            .collect();
-        for (slot, &b) in body_of.iter().enumerate() {
-            let Some(alpha) = alpha[b].as_ref().filter(|_| self.used[slot]) else {
-                continue;
-            };
-            null_at(slot, &mut n);
-            let r = &mut rhs[slot * m * D..(slot + 1) * m * D];
-            for k in 0..D {
-                for e in 0..m {
-                    r[k * m + e] -= (0..m).map(|f| n[e * m + f] * alpha[(f, k)]).sum::<f64>();
-                }
-            }
-        }
     }
 
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.
@@ -776,14 +809,249 @@ impl<const D: usize> VcCorrection<D> {
         let m = self.m();
         let slot = slot as usize;
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
+        let (mu, slope) = &self.fit[p];
         if m == 1 {
-            return (Vector::<D>::from_fn(|k, _| r[k]) - self.mean[p]) * weight.abs();
+            let (t, o) = &self.frame[p];
+            let u = t * ((grid.node_position(grid.node_multi_index(n)) - x) / grid.cell_size) - o;
+            return (Vector::<D>::from_fn(|k, _| r[k]) - mu - slope * u) * weight.abs();
         }
         let mut q = [0.0; MAX_BASIS];
         let z = (x - grid.node_position(grid.node_multi_index(n))) / grid.cell_size;
         self.basis_at(&z, &mut q[..m], None);
-        (Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum()) - self.mean[p])
-            * weight.abs()
+        (Vector::<D>::from_fn(|k, _| (0..m).map(|j| r[k * m + j] * q[j]).sum()) - mu) * weight.abs()
+    }
+}
+
+/// A particle's frame of the order-1 linear fit, from the weighted moments of its node offsets
+/// `d_I = (x_I − x_p)/h` (`weight = Σ w_I`, `first = Σ w_I d_I`, `second = Σ w_I d_I d_Iᵀ`):
+/// `(T, o)` such that `u_I = T d_I − o` has weighted mean zero and weighted second moment the
+/// identity, `Σ_I w_I u_I = 0` and `Σ_I w_I u_I u_Iᵀ = 1`. `T = L⁻¹` for the Cholesky factor `L`
+/// of the centred moment `S = second − first firstᵀ / weight`; a pivot at or below
+/// `1e-10 weight` (the offsets do not span that direction: linear hats, a particle on a node
+/// line) is dropped, its row of `T` zero, so that `u_I·u_J = (d_I − d̄)ᵀ S⁺ (d_J − d̄)` whatever
+/// the rank. Zero for a particle without weight.
+fn linear_frame<const D: usize>(
+    weight: f64,
+    first: Vector<D>,
+    second: Matrix<D>,
+) -> (Matrix<D>, Vector<D>) {
+    if weight <= 0.0 {
+        return (Matrix::zeros(), Vector::zeros());
+    }
+    let centre = first / weight;
+    let s = second - first * centre.transpose();
+    let mut l = Matrix::<D>::zeros();
+    let mut kept = [false; D];
+    for j in 0..D {
+        let pivot = s[(j, j)] - (0..j).map(|k| l[(j, k)] * l[(j, k)]).sum::<f64>();
+        if pivot <= 1e-10 * weight {
+            continue;
+        }
+        kept[j] = true;
+        l[(j, j)] = pivot.sqrt();
+        for i in j + 1..D {
+            l[(i, j)] =
+                (s[(i, j)] - (0..j).map(|k| l[(i, k)] * l[(j, k)]).sum::<f64>()) / l[(j, j)];
+        }
+    }
+    let mut t = Matrix::<D>::zeros();
+    for i in (0..D).filter(|&i| kept[i]) {
+        for c in 0..D {
+            let unit = if i == c { 1.0 } else { 0.0 };
+            t[(i, c)] = (unit - (0..i).map(|k| l[(i, k)] * t[(k, c)]).sum::<f64>()) / l[(i, i)];
+        }
+    }
+    (t, t * centre)
+}
+
+/// `K`'s null space, per body: the node coefficients of every global polynomial `P` of the
+/// null degree (`< n` at order n ≥ 2; at order 1, 1 with the linear fit, which reproduces the
+/// linear fields, and 0 with the mean fit), re-expanded about each node, `P(x_c + h (d_I + z)) = Σ_e N_Ie z^e`,
+/// `d_I = (x_I − x_c)/h` about the body's node centroid `x_c` (binomial coefficients).
+struct NullSpace<'a, const D: usize> {
+    grid: &'a Grid<D>,
+    nodes: &'a GridNodes<D>,
+    body_of: &'a [usize],
+    used: &'a [bool],
+    /// Per slot, the weight of the removed part (the oblique projection), or 1.
+    weight: Option<&'a [f64]>,
+    exps: Vec<[u32; D]>,
+    nulls: Vec<[u32; D]>,
+    centroid: Vec<Vector<D>>,
+    /// Per body, the pseudo-inverse of `G = Σ_I a_I N_Iᵀ N_I`.
+    gram_inverse: Vec<DMatrix<f64>>,
+}
+
+impl<'a, const D: usize> NullSpace<'a, D> {
+    fn new(
+        degree: u32,
+        exps: &[[u32; D]],
+        used: &'a [bool],
+        grid: &'a Grid<D>,
+        nodes: &'a GridNodes<D>,
+        body_of: &'a [usize],
+        weight: Option<&'a [f64]>,
+    ) -> Self {
+        let exps = exps.to_vec();
+        let nulls = Monomials::<D>::up_to(degree).exponents().to_vec();
+        let bodies = body_of.iter().map(|&b| b + 1).max().unwrap_or(0);
+        let mut sums = vec![(0.0, Vector::<D>::zeros()); bodies];
+        for (slot, &b) in body_of.iter().enumerate() {
+            if used[slot] {
+                sums[b].0 += 1.0;
+                sums[b].1 += grid.node_position(grid.node_multi_index(nodes.active[slot]));
+            }
+        }
+        let centroid = sums
+            .iter()
+            .map(|&(c, x): &(f64, Vector<D>)| x / c.max(1.0))
+            .collect();
+        let mut space = NullSpace {
+            grid,
+            nodes,
+            body_of,
+            used,
+            weight,
+            exps,
+            nulls,
+            centroid,
+            gram_inverse: Vec::new(),
+        };
+        let (m, k) = (space.exps.len(), space.nulls.len());
+        let mut gram = vec![DMatrix::<f64>::zeros(k, k); bodies];
+        let mut n = vec![0.0; m * k];
+        for (slot, &b) in body_of.iter().enumerate() {
+            if !used[slot] {
+                continue;
+            }
+            space.null_at(slot, &mut n);
+            let a = space.weight_of(slot);
+            for f in 0..k {
+                for g in 0..k {
+                    gram[b][(f, g)] += a * (0..m).map(|e| n[e * k + f] * n[e * k + g]).sum::<f64>();
+                }
+            }
+        }
+        // A body too thin to fix a linear field (its nodes on one line) keeps the rest: the
+        // pseudo-inverse of its Gram matrix.
+        space.gram_inverse = gram
+            .into_iter()
+            .map(|g| {
+                let tolerance = 1e-12 * g.norm();
+                g.pseudo_inverse(tolerance)
+                    .unwrap_or_else(|_| DMatrix::zeros(k, k))
+            })
+            .collect();
+        space
+    }
+
+    fn weight_of(&self, slot: usize) -> f64 {
+        self.weight.map_or(1.0, |w| w[slot])
+    }
+
+    /// `N_I[e][f]`: coefficient of `z^e` in the re-expansion of the null monomial `f`.
+    fn null_at(&self, slot: usize, out: &mut [f64]) {
+        let binomial = |n: u32, k: u32| -> f64 {
+            (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
+        };
+        let k = self.nulls.len();
+        let x = self
+            .grid
+            .node_position(self.grid.node_multi_index(self.nodes.active[slot]));
+        let d = (x - self.centroid[self.body_of[slot]]) / self.grid.cell_size;
+        for (e, ee) in self.exps.iter().enumerate() {
+            for (f, ff) in self.nulls.iter().enumerate() {
+                out[e * k + f] = if (0..D).all(|a| ee[a] <= ff[a]) {
+                    (0..D)
+                        .map(|a| binomial(ff[a], ee[a]) * d[a].powi((ff[a] - ee[a]) as i32))
+                        .product()
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+
+    /// Removes from the coefficients `v` their part along the null space, orthogonally in the
+    /// weights' inner product: `v_I −= N_I G⁻¹ Σ_J N_Jᵀ a_J v_J`, after which
+    /// `Σ_J a_J N_Jᵀ v_J = 0` per body. `K v` is unchanged.
+    fn remove_from_coefficients(&self, v: &mut [f64]) {
+        let (m, k) = (self.exps.len(), self.nulls.len());
+        let bodies = self.gram_inverse.len();
+        let mut t = vec![DMatrix::<f64>::zeros(k, D); bodies];
+        let mut n = vec![0.0; m * k];
+        for (slot, &b) in self.body_of.iter().enumerate() {
+            if !self.used[slot] {
+                continue;
+            }
+            self.null_at(slot, &mut n);
+            let a = self.weight_of(slot);
+            let r = &v[slot * m * D..(slot + 1) * m * D];
+            for f in 0..k {
+                for c in 0..D {
+                    t[b][(f, c)] += a * (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
+                }
+            }
+        }
+        let alpha: Vec<DMatrix<f64>> = self
+            .gram_inverse
+            .iter()
+            .zip(t)
+            .map(|(g, t)| g * t)
+            .collect();
+        for (slot, &b) in self.body_of.iter().enumerate() {
+            if !self.used[slot] {
+                continue;
+            }
+            self.null_at(slot, &mut n);
+            let r = &mut v[slot * m * D..(slot + 1) * m * D];
+            for c in 0..D {
+                for e in 0..m {
+                    r[c * m + e] -= (0..k).map(|f| n[e * k + f] * alpha[b][(f, c)]).sum::<f64>();
+                }
+            }
+        }
+    }
+
+    /// Removes from `v` (per slot, `m` values per direction) its part along the null space:
+    /// `v_I −= a_I N_I G⁻¹ Σ_J N_Jᵀ v_J`, after which `Σ_J N_Jᵀ v_J = 0` per body.
+    fn remove(&self, v: &mut [f64]) {
+        let (m, k) = (self.exps.len(), self.nulls.len());
+        let bodies = self.gram_inverse.len();
+        let mut t = vec![DMatrix::<f64>::zeros(k, D); bodies];
+        let mut n = vec![0.0; m * k];
+        for (slot, &b) in self.body_of.iter().enumerate() {
+            if !self.used[slot] {
+                continue;
+            }
+            self.null_at(slot, &mut n);
+            let r = &v[slot * m * D..(slot + 1) * m * D];
+            for f in 0..k {
+                for c in 0..D {
+                    t[b][(f, c)] += (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
+                }
+            }
+        }
+        let alpha: Vec<DMatrix<f64>> = self
+            .gram_inverse
+            .iter()
+            .zip(t)
+            .map(|(g, t)| g * t)
+            .collect();
+        for (slot, &b) in self.body_of.iter().enumerate() {
+            if !self.used[slot] {
+                continue;
+            }
+            self.null_at(slot, &mut n);
+            let r = &mut v[slot * m * D..(slot + 1) * m * D];
+            let a = self.weight_of(slot);
+            for c in 0..D {
+                for e in 0..m {
+                    r[c * m + e] -=
+                        a * (0..k).map(|f| n[e * k + f] * alpha[b][(f, c)]).sum::<f64>();
+                }
+            }
+        }
     }
 }
 

@@ -36,8 +36,9 @@ pub(crate) struct NodeOperator<const D: usize> {
     /// Per row: the diagonal block, `m × m` by rows. Its first entry (the constant
     /// polynomial's) is zero for a row without particles, which takes no part.
     diagonal: Vec<f64>,
-    /// Per row (`m > 1`): the moment matrix `A_I` (on coarse levels `Σ Pᵀ A P` over the
-    /// aggregate), `m × m` by rows, which bounds the row's part of `K` from above.
+    /// Per row (`m > 1`, and at order 1 with the linear fit): the moment matrix `A_I` (the
+    /// reach at order 1; on coarse levels `Σ Pᵀ A P` over the aggregate), `m × m` by rows,
+    /// which bounds the row's part of `K` from above.
     moment: Vec<f64>,
     /// Per row (`m > 1`): the inverse of `moment` that the smoother applies, or of its constant
     /// entry alone where it is singular (see [`block_inverse`]).
@@ -97,6 +98,7 @@ impl<const D: usize> NodeOperator<D> {
         volumes: &[f64],
         (moment, reduced, m): (&[f64], &[bool], usize),
         basis: impl Fn(usize, usize, &mut [f64]) + Sync,
+        frame_offset: impl Fn(usize, usize) -> crate::Vector<D> + Sync,
         counted: impl Fn(usize) -> bool + Sync,
     ) -> Option<Self> {
         let len = stencils.len;
@@ -150,6 +152,7 @@ impl<const D: usize> NodeOperator<D> {
                     let mut row = vec![0usize; len];
                     let mut key = vec![0isize; len];
                     let mut q = vec![0.0; len * m];
+                    let mut u = vec![crate::Vector::<D>::zeros(); len];
                     for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
                         let p = p as usize;
                         if !counted(p) {
@@ -162,6 +165,8 @@ impl<const D: usize> NodeOperator<D> {
                                 row[s] = nodes.slot(ns[s]);
                                 if m > 1 {
                                     basis(p, ns[s], &mut q[s * m..(s + 1) * m]);
+                                } else {
+                                    u[s] = frame_offset(p, ns[s]);
                                 }
                                 vs[s].abs()
                             } else {
@@ -201,7 +206,7 @@ impl<const D: usize> NodeOperator<D> {
                                 }
                                 let e = (base + key[j]) as usize;
                                 if m == 1 {
-                                    r[e] += ci * w[j];
+                                    r[e] += ci * w[j] * (1.0 + total * u[i].dot(&u[j]));
                                     continue;
                                 }
                                 let cij = ci * w[j];
@@ -447,11 +452,17 @@ const COARSEST_ROWS: usize = 400;
 /// A multilevel preconditioner: aggregation of 2^D lattice neighbours per level, Galerkin coarse
 /// operators `Pᵀ K P`, damped block-Jacobi smoothing, and a dense factor of the coarsest level.
 /// The prolongation `P` re-expands an aggregate's polynomial about each of its nodes (at order 1
-/// it is piecewise constant), so that every level holds the polynomials of degree < n over a
-/// whole body, `K`'s null space. One V-cycle with as many sweeps after as before the coarse
+/// it is piecewise constant with the mean fit; with the linear fit, whose null space is the linear
+/// fields, the coarse levels carry `1, Z` per aggregate), so that every level holds `K`'s null
+/// space over a whole body. One V-cycle with as many sweeps after as before the coarse
 /// correction is a fixed symmetric positive semi-definite operator, as conjugate gradients need.
 /// `K`'s iterations with the node blocks alone grow with the grid's width (about 450 at 160
-/// nodes across at order 1); with the V-cycle they do not.
+/// nodes across with the mean fit); with the V-cycle they do not. The linear fit's `K` weighs a
+/// field's departure from linear, a fourth-order operator (node blocks: 80 iterations at 20
+/// cells, over 2000 at 160), and its V-cycle's iterations still grow: 41 at 80 cells, 108 at
+/// 160 (cubic B-spline + VC1, the test `first_order_solve_iterations_grow_slowly_with_the_linear_fit`;
+/// piecewise-constant coarse levels took 134 and 287, quadratic ones 67 and 215, a W-cycle
+/// 30 and 60 at twice the cost per level).
 pub(crate) struct Multilevel<const D: usize> {
     /// Per fine row: its diagonal if the row is weak (preconditioned by its diagonal block
     /// alone), else 0.
@@ -507,8 +518,12 @@ fn re_expansion<const D: usize>(exponents: &[[u32; D]], d: [f64; D], s: f64) -> 
 
 impl<const D: usize> NodeOperator<D> {
     /// The Galerkin operator of aggregates of 2^D lattice neighbours, and each row's aggregate.
-    fn coarsen(&self, prolongation: &[Vec<f64>]) -> (NodeOperator<D>, Vec<u32>) {
+    /// `prolongation` holds `mc × mc` blocks (`mc` the coarse level's polynomials); a row of
+    /// this level with `m ≤ mc` polynomials (its exponents the first `m` of the coarse ones)
+    /// takes the first `m` rows of its block.
+    fn coarsen(&self, prolongation: &[Vec<f64>], mc: usize) -> (NodeOperator<D>, Vec<u32>) {
         let (m, mm) = (self.m, self.m * self.m);
+        let mcc = mc * mc;
         let rows = self.rows();
         let mut numbers = std::collections::HashMap::<[i64; D], u32>::new();
         let mut index = Vec::new();
@@ -535,8 +550,8 @@ impl<const D: usize> NodeOperator<D> {
         let span = 2 * radius + 1;
         let block = span.pow(D as u32);
         let centre = (block - 1) / 2;
-        let mut dense = vec![0.0; coarse * block * mm];
-        let mut vp = vec![0.0; mm];
+        let mut dense = vec![0.0; coarse * block * mcc];
+        let mut vp = vec![0.0; m * mc];
         for i in 0..rows {
             let a = parent[i];
             if a == u32::MAX {
@@ -556,29 +571,29 @@ impl<const D: usize> NodeOperator<D> {
                     .map(|k| (ib[k] - ia[k] + radius as i64) as usize * span.pow(k as u32))
                     .sum();
                 let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
-                let out = &mut dense[(a as usize * block + key) * mm..][..mm];
-                if m == 1 {
+                let out = &mut dense[(a as usize * block + key) * mcc..][..mcc];
+                if mc == 1 {
                     out[0] += v[0];
                     continue;
                 }
                 // P_iᵀ V P_j.
                 let (pi, pj) = (child(i), child(j));
                 for r in 0..m {
-                    for g in 0..m {
-                        vp[r * m + g] = (0..m).map(|h| v[r * m + h] * pj[h * m + g]).sum();
+                    for g in 0..mc {
+                        vp[r * mc + g] = (0..m).map(|h| v[r * m + h] * pj[h * mc + g]).sum();
                     }
                 }
-                for f in 0..m {
-                    for g in 0..m {
-                        out[f * m + g] +=
-                            (0..m).map(|r| pi[r * m + f] * vp[r * m + g]).sum::<f64>();
+                for f in 0..mc {
+                    for g in 0..mc {
+                        out[f * mc + g] +=
+                            (0..m).map(|r| pi[r * mc + f] * vp[r * mc + g]).sum::<f64>();
                     }
                 }
             }
         }
         let mut count = vec![0u32; coarse];
         let mut column = vec![0u32; coarse * block];
-        let mut value = vec![0.0; coarse * block * mm];
+        let mut value = vec![0.0; coarse * block * mcc];
         let steps: Vec<[i64; D]> = (0..block)
             .map(|e| {
                 std::array::from_fn(|k| ((e / span.pow(k as u32)) % span) as i64 - radius as i64)
@@ -587,30 +602,33 @@ impl<const D: usize> NodeOperator<D> {
         for a in 0..coarse {
             let mut k = 0;
             for e in 0..block {
-                let v = &dense[(a * block + e) * mm..(a * block + e + 1) * mm];
+                let v = &dense[(a * block + e) * mcc..(a * block + e + 1) * mcc];
                 if e != centre && v.iter().all(|&x| x == 0.0) {
                     continue;
                 }
                 let at: [i64; D] = std::array::from_fn(|c| index[a][c] + steps[e][c]);
                 column[a * block + k] = numbers[&at];
-                value[(a * block + k) * mm..(a * block + k + 1) * mm].copy_from_slice(v);
+                value[(a * block + k) * mcc..(a * block + k + 1) * mcc].copy_from_slice(v);
                 k += 1;
             }
             count[a] = k as u32;
         }
         let diagonal = (0..coarse)
-            .flat_map(|a| dense[(a * block + centre) * mm..(a * block + centre + 1) * mm].to_vec())
+            .flat_map(|a| {
+                dense[(a * block + centre) * mcc..(a * block + centre + 1) * mcc].to_vec()
+            })
             .collect();
         // Σ_i P_iᵀ A_i P_i over each aggregate: block diagonal, as every node has one parent.
-        let mut moment = vec![0.0; if m > 1 { coarse * mm } else { 0 }];
-        for i in (0..rows).filter(|&i| m > 1 && parent[i] != u32::MAX) {
+        let mut moment = vec![0.0; if mc > 1 { coarse * mcc } else { 0 }];
+        for i in (0..rows).filter(|&i| mc > 1 && parent[i] != u32::MAX) {
             let (p, a) = (child(i), &self.moment[i * mm..(i + 1) * mm]);
-            let out = &mut moment[parent[i] as usize * mm..][..mm];
-            for f in 0..m {
-                for g in 0..m {
-                    out[f * m + g] += (0..m)
+            let out = &mut moment[parent[i] as usize * mcc..][..mcc];
+            for f in 0..mc {
+                for g in 0..mc {
+                    out[f * mc + g] += (0..m)
                         .map(|r| {
-                            p[r * m + f] * (0..m).map(|h| a[r * m + h] * p[h * m + g]).sum::<f64>()
+                            p[r * mc + f]
+                                * (0..m).map(|h| a[r * m + h] * p[h * mc + g]).sum::<f64>()
                         })
                         .sum::<f64>();
                 }
@@ -619,7 +637,7 @@ impl<const D: usize> NodeOperator<D> {
         (
             NodeOperator::new(
                 index,
-                (m, diagonal, moment),
+                (mc, diagonal, moment),
                 radius,
                 block,
                 (count, column, value),
@@ -628,8 +646,8 @@ impl<const D: usize> NodeOperator<D> {
         )
     }
 
-    /// `x += ω D⁻¹ (r − K x)` (rows without particles stay zero): at order 1 `D` is `K`'s
-    /// diagonal; at order ≥ 2 the moment blocks, since `K ⪯ A` (`⟨ζ, Kζ⟩` is a weighted variance,
+    /// `x += ω D⁻¹ (r − K x)` (rows without particles stay zero): at order 1 with the mean fit
+    /// `D` is `K`'s diagonal; otherwise the moment blocks (the reach with the linear fit), since `K ⪯ A` (`⟨ζ, Kζ⟩` is a weighted variance,
     /// `⟨ζ, Aζ⟩` the weighted mean square it is taken of) keeps `A⁻¹K`'s eigenvalues in [0, 1]
     /// on any particles, where `K`'s diagonal blocks give no such bound.
     /// With `from_zero` (`x` is zero) `K x` is not computed.
@@ -644,10 +662,15 @@ impl<const D: usize> NodeOperator<D> {
             x.par_chunks_exact_mut(D)
                 .zip(r.par_chunks_exact(D).zip(kx.par_chunks_exact(D)))
                 .zip(self.diagonal.par_iter())
-                .for_each(|((x, (r, kx)), &d)| {
+                .enumerate()
+                .for_each(|(i, ((x, (r, kx)), &d))| {
                     if d > 0.0 {
+                        let (w, d) = match self.moment.get(i) {
+                            Some(&a) => (MOMENT_DAMPING, a),
+                            None => (JACOBI_DAMPING, d),
+                        };
                         for k in 0..D {
-                            x[k] += JACOBI_DAMPING * (r[k] - kx[k]) / d;
+                            x[k] += w * (r[k] - kx[k]) / d;
                         }
                     }
                 });
@@ -676,13 +699,15 @@ impl<const D: usize> NodeOperator<D> {
 impl<const D: usize> Multilevel<D> {
     /// The levels below `fine`, coarsened until the coarsest has at most `COARSEST_ROWS`
     /// unknowns per direction or stops shrinking; `exponents` are the test polynomials'
-    /// (as [`crate::shape::Monomials`] lists them), `reduced` the nodes corrected to order 1.
+    /// (as [`crate::shape::Monomials`] lists them), `reduced` the nodes corrected to order 1,
+    /// `reach` the nodes' reaches `A_I` at order 1 with the linear fit (`None` otherwise).
     /// Without `cycle`, only the fine operator (preconditioned by the caller).
     pub fn new(
         mut fine: NodeOperator<D>,
         cycle: bool,
         exponents: &[[u32; D]],
         reduced: &[bool],
+        reach: Option<&[f64]>,
     ) -> Self {
         if !cycle {
             return Multilevel {
@@ -698,6 +723,18 @@ impl<const D: usize> Multilevel<D> {
             };
         }
         let (m, mm) = (fine.m, fine.m * fine.m);
+        // With the linear fit (`reach`, order 1) the coarse levels carry `1, Z` per aggregate.
+        let linear: Vec<[u32; D]> = std::iter::once([0; D])
+            .chain((0..D).map(|a| std::array::from_fn(|b| (a == b) as u32)))
+            .collect();
+
+        let coarse_exponents = match reach {
+            Some(reach) if m == 1 => {
+                fine.moment = reach.to_vec();
+                &linear[..]
+            }
+            _ => exponents,
+        };
         let largest = (0..fine.rows()).fold(0.0f64, |a, i| a.max(fine.diagonal[i * mm]));
         // At order ≥ 2 no row is left out: the weak rows' blocks, outside the V-cycle, doubled
         // the iterations (RK2 + VC2 at 16 cells: 44 against 19).
@@ -718,18 +755,19 @@ impl<const D: usize> Multilevel<D> {
         let prolongation = (0..1usize << D)
             .map(|c| {
                 let d = std::array::from_fn(|a| (((c >> a) & 1) as f64 - 0.5) / 2.0);
-                re_expansion(exponents, d, 0.5)
+                re_expansion(coarse_exponents, d, 0.5)
             })
             .collect::<Vec<_>>();
+        let mc = coarse_exponents.len();
         let mut levels = vec![fine];
         let mut parent = Vec::new();
         loop {
             let last = levels.last().expect("the fine level");
             let rows = last.rows();
-            if rows * m <= COARSEST_ROWS {
+            if rows * last.m <= COARSEST_ROWS {
                 break;
             }
-            let (coarse, up) = last.coarsen(&prolongation);
+            let (coarse, up) = last.coarsen(&prolongation, mc);
             if coarse.rows() * 3 > rows * 2 {
                 break;
             }
@@ -738,6 +776,7 @@ impl<const D: usize> Multilevel<D> {
         }
         let last = levels.last().expect("the fine level");
         let n = last.rows();
+        let (m, mm) = (last.m, last.m * last.m);
         let mut dense = DMatrix::<f64>::zeros(n * m, n * m);
         for i in 0..n {
             let start = i * last.block;
@@ -901,8 +940,9 @@ impl<const D: usize> Multilevel<D> {
         // The residual, restricted onto the aggregates in row order (at order 1 summed).
         level.apply(x, &mut kx);
         let parent = &self.parent[l];
-        let coarse = self.levels[l + 1].rows();
-        let mut rc = vec![0.0; coarse * per];
+        let (coarse, mc) = (self.levels[l + 1].rows(), self.levels[l + 1].m);
+        let pc = mc * D;
+        let mut rc = vec![0.0; coarse * pc];
         let child = |i: usize| -> &[f64] {
             let c: usize = (0..D)
                 .map(|a| (level.index[i][a].rem_euclid(2) as usize) << a)
@@ -914,7 +954,7 @@ impl<const D: usize> Multilevel<D> {
                 continue;
             }
             let a = a as usize;
-            if m == 1 {
+            if mc == 1 {
                 for k in 0..D {
                     rc[a * D + k] += r[i * D + k] - kx[i * D + k];
                 }
@@ -922,14 +962,14 @@ impl<const D: usize> Multilevel<D> {
             }
             let p = child(i);
             for k in 0..D {
-                for f in 0..m {
-                    rc[a * per + k * m + f] += (0..m)
-                        .map(|e| p[e * m + f] * (r[i * per + k * m + e] - kx[i * per + k * m + e]))
+                for f in 0..mc {
+                    rc[a * pc + k * mc + f] += (0..m)
+                        .map(|e| p[e * mc + f] * (r[i * per + k * m + e] - kx[i * per + k * m + e]))
                         .sum::<f64>();
                 }
             }
         }
-        let mut xc = vec![0.0; coarse * per];
+        let mut xc = vec![0.0; coarse * pc];
         self.cycle(l + 1, &rc, &mut xc);
         let reduced = if l == 0 { &self.reduced[..] } else { &[] };
         x.par_chunks_exact_mut(per)
@@ -940,7 +980,7 @@ impl<const D: usize> Multilevel<D> {
                     return;
                 }
                 let a = a as usize;
-                if m == 1 {
+                if mc == 1 {
                     for k in 0..D {
                         x[k] += COARSE_WEIGHT * xc[a * D + k];
                     }
@@ -952,8 +992,8 @@ impl<const D: usize> Multilevel<D> {
                 for k in 0..D {
                     for e in 0..terms {
                         x[k * m + e] += COARSE_WEIGHT_HIGHER
-                            * (0..m)
-                                .map(|f| p[e * m + f] * xc[a * per + k * m + f])
+                            * (0..mc)
+                                .map(|f| p[e * mc + f] * xc[a * pc + k * mc + f])
                                 .sum::<f64>();
                     }
                 }

@@ -703,11 +703,11 @@ mod tests {
     #[test]
     fn version_1_files_load_in_id_order() {
         let sim = block();
-        assert!(sim.particles().in_id_order());
+        assert!(sim.particles.in_id_order());
         let bytes = sim.encode(1);
         assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
         let copy = Sim::<2>::from_checkpoint_bytes(&bytes).unwrap();
-        assert_eq!(copy.particles(), sim.particles());
+        assert_eq!(copy.particles, sim.particles);
     }
 
     /// Format 3 keeps the energy ledger; a format-2 file loads with the accounting off.
@@ -722,7 +722,7 @@ mod tests {
         assert_eq!(copy.energy, sim.energy);
         let old = Sim::<2>::from_checkpoint_bytes(&sim.encode(2)).unwrap();
         assert_eq!(old.energy, crate::energy::EnergyLedger::default());
-        assert_eq!(old.particles(), sim.particles());
+        assert_eq!(old.particles, sim.particles);
         // A flag other than 0 or 1 is refused.
         let mut bytes = sim.checkpoint_bytes();
         let flag = bytes.len() - 4 - 6 * 8 - 4;
@@ -741,9 +741,9 @@ mod tests {
         let dt = sim.stable_dt(0.3).unwrap();
         sim.step(dt).unwrap();
         // The step sorted them: the ids are a permutation, not the identity.
-        assert!(!sim.particles().in_id_order());
+        assert!(!sim.particles.in_id_order());
         let copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
-        assert_eq!(copy.particles(), sim.particles());
+        assert_eq!(copy.particles, sim.particles);
         // Ids that are not a permutation are refused.
         sim.particles.id[1] = sim.particles.id[0];
         let e = match Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()) {

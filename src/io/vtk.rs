@@ -103,11 +103,12 @@ fn pad33(values: &[f64], d: usize) -> Vec<f64> {
 
 /// The `.vtu` file of the particles of `sim`: points (one vertex cell each, in id order), and
 /// point data `velocity`, `displacement`, `stress` (3×3, plane components zero-padded in 2D),
-/// `pressure`, `volume`, `mass`, `plastic_strain`, `material`. [`VtkFormat::Binary`] appends
+/// `pressure`, `volume`, `mass`, `plastic_strain` and `damage` (where a material has them,
+/// [`Sim::carries`]), `material`. [`VtkFormat::Binary`] appends
 /// the arrays as raw bytes after the XML, as ParaView writes them; [`VtkFormat::Ascii`] writes
 /// them as text inside it.
 pub fn particles_vtu<const D: usize>(sim: &Sim<D>, format: VtkFormat) -> Vec<u8> {
-    let ps = sim.particles();
+    let ps = &sim.particles;
     let n = ps.len();
     let float = |name, components, values| Array {
         name,
@@ -142,8 +143,12 @@ pub fn particles_vtu<const D: usize>(sim: &Sim<D>, format: VtkFormat) -> Vec<u8>
         Field::Volume,
         Field::Mass,
         Field::PlasticStrain,
+        Field::Damage,
     ] {
-        data.push(float(f.name(), 1, sim.field(f)));
+        // Plastic strain and damage where a material has them ([`Sim::carries`]).
+        if sim.carries(f) {
+            data.push(float(f.name(), 1, sim.field(f)));
+        }
     }
     // In id order, as the fields above.
     data.push(float(
@@ -354,7 +359,7 @@ mod tests {
         let dt = sim.stable_dt(0.2).unwrap();
         sim.step(dt).unwrap();
         // Storage out of id order, as the steps' sort leaves it in general.
-        let reversed: Vec<u32> = (0..sim.particles().len() as u32).rev().collect();
+        let reversed: Vec<u32> = (0..sim.particles.len() as u32).rev().collect();
         sim.particles
             .permute(&reversed, &mut crate::particles::SpareArrays::default());
         let second = series.write_frame(&sim).unwrap();
@@ -366,7 +371,7 @@ mod tests {
         assert!(pvd.contains(&format!("timestep=\"{:e}\"", sim.time())));
 
         let vtu = std::fs::read(&second).unwrap();
-        let n = sim.particles().len();
+        let n = sim.particles.len();
         let header = String::from_utf8_lossy(&vtu[..vtu.len().min(2000)]).into_owned();
         assert!(header.contains(&format!("NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\"")));
         assert!(header.contains("format=\"appended\""), "binary by default");
@@ -375,7 +380,7 @@ mod tests {
         let velocity = array(&vtu, "velocity");
         let stress = array(&vtu, "stress");
         // The file lists the particles in id order, whatever their storage order.
-        let ps = sim.particles();
+        let ps = &sim.particles;
         let (mass, material) = (array(&vtu, "mass"), array(&vtu, "material"));
         for p in 0..n {
             let i = ps.id[p] as usize;
@@ -418,10 +423,14 @@ mod tests {
             "pressure",
             "volume",
             "mass",
-            "plastic_strain",
             "material",
         ];
-        let n = sim.particles().len();
+        // An elastic material has neither plastic strain nor damage: not written.
+        for name in ["plastic_strain", "damage"] {
+            let text = String::from_utf8_lossy(&ascii).into_owned();
+            assert!(!text.contains(&format!("Name=\"{name}\"")), "{name}");
+        }
+        let n = sim.particles.len();
         for name in names {
             let (b, a) = (array(&binary, name), array(&ascii, name));
             assert_eq!(b.len(), a.len(), "{name}");
@@ -431,7 +440,7 @@ mod tests {
             }
         }
         assert_eq!(array(&binary, "stress")[9 * 3..9 * 3 + 2], {
-            let ps = sim.particles();
+            let ps = &sim.particles;
             let p = ps.slots()[3];
             [ps.stress[p][(0, 0)], ps.stress[p][(0, 1)]]
         });
@@ -441,6 +450,32 @@ mod tests {
             binary.len(),
             ascii.len()
         );
+    }
+
+    /// A Johnson–Cook material with damage puts `plastic_strain` and `damage` into the file, in
+    /// id order, as `Sim::field` gives them; without damage only `plastic_strain`.
+    #[test]
+    fn plastic_strain_and_damage_are_written_where_a_material_has_them() {
+        for damage in [true, false] {
+            let mut sim = Sim::<2>::new([0.0, 0.0], [8, 8], 0.125).unwrap();
+            let mut p = crate::material::ofhc_copper();
+            if !damage {
+                p.damage = None;
+            }
+            let m = sim.add_material(Material::johnson_cook(p).unwrap());
+            let x: Vec<Vector<2>> = (0..16)
+                .map(|k| Vector::<2>::new(0.3 + 0.05 * (k % 4) as f64, 0.4 + 0.05 * (k / 4) as f64))
+                .collect();
+            sim.add_particles(m, &x, &[0.0025; 16], None).unwrap();
+            let text = particles_vtu(&sim, VtkFormat::Ascii);
+            let has =
+                |name: &str| String::from_utf8_lossy(&text).contains(&format!("Name=\"{name}\""));
+            assert!(has("plastic_strain"));
+            assert_eq!(has("damage"), damage);
+            if damage {
+                assert_eq!(array(&text, "damage"), sim.field(Field::Damage));
+            }
+        }
     }
 
     /// A write into a directory that does not exist says which file it could not write.

@@ -118,6 +118,20 @@ impl Material {
         Ok(Material::Rigid(Rigid { density, velocity }))
     }
 
+    /// Whether the material gives `field` values of its own, beyond the zero every other
+    /// material reads: plastic strain for the elastoplastic materials, damage for Johnson–Cook
+    /// with damage; every other field for every material.
+    pub fn carries(&self, field: crate::particles::Field) -> bool {
+        use crate::particles::Field;
+        match field {
+            Field::PlasticStrain => {
+                matches!(self, Material::DruckerPrager(_) | Material::JohnsonCook(_))
+            }
+            Field::Damage => matches!(self, Material::JohnsonCook(j) if j.p.damage.is_some()),
+            _ => true,
+        }
+    }
+
     /// The prescribed velocity of a rigid body.
     pub fn rigid_velocity<const D: usize>(&self) -> Option<crate::Vector<D>> {
         match self {

@@ -29,16 +29,17 @@ impl<const D: usize> Sim<D> {
     /// state after the last good step, and the error message says how many steps were taken
     /// and at which time it stopped.
     pub fn advance(&mut self, duration: f64, cfl: f64) -> Result<u64> {
-        self.advance_observed(duration, cfl, &mut |_| true)
+        self.advance_observed(duration, cfl, &mut |_, _| true)
     }
 
-    /// [`Sim::advance`], calling `observe` after every step with the progress; when it returns
-    /// `false` the run stops there (the steps taken stand) with a `Callback` error.
+    /// [`Sim::advance`], calling `observe` after every step with the simulation and the
+    /// progress (to write output at the steps the run takes anyway); when it returns `false` the
+    /// run stops there (the steps taken stand) with a `Callback` error.
     pub fn advance_observed(
         &mut self,
         duration: f64,
         cfl: f64,
-        observe: &mut dyn FnMut(Progress) -> bool,
+        observe: &mut dyn FnMut(&Sim<D>, Progress) -> bool,
     ) -> Result<u64> {
         check_finite("duration", duration)?;
         if duration <= 0.0 {
@@ -94,7 +95,7 @@ impl<const D: usize> Sim<D> {
                 end,
                 dt,
             };
-            if !observe(progress) {
+            if !observe(self, progress) {
                 return Err(Error::new(
                     ErrorKind::Callback,
                     format!(

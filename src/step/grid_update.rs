@@ -2,7 +2,8 @@
 
 use crate::grid::{Grid, GridNodes, SharedSlice};
 use crate::options::Walls;
-use crate::Vector;
+use crate::{Matrix, Vector};
+use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 /// Signed shape functions: the smallest node mass, as a fraction of the largest node mass, that
@@ -95,28 +96,38 @@ pub fn grid_update<const D: usize>(
         }
     });
     // The force the edge-mass floor held back, and the momentum and forces of the nodes at or
-    // below the mass floor (which get no velocity), handed to the whole field as one
-    // acceleration (mass-weighted), so that the field's momentum still changes by Σ f Δt; with
-    // walls, which take momentum anyway and must not be pushed through, they are dropped. Sums
-    // in node order: the same bits with any number of threads.
+    // below the mass floor (which get no velocity), handed to the whole field as one rigid-body
+    // acceleration (see [`rigid_acceleration`]), so that the field's momentum and angular
+    // momentum still change by Σ f Δt and Σ x × f Δt; with walls, which take momentum anyway and
+    // must not be pushed through, they are dropped. Sums in node order: the same bits with any
+    // number of threads.
     if let (Some(dt), true) = (dt, force_mass_floor > 0.0 && !walls.any_wall()) {
-        let (mut held, mut total) = (Vector::<D>::zeros(), 0.0);
+        let mut held = Vec::new();
         for &n in &nodes.active {
             let m = nodes.mass[n];
-            if m > mass_floor {
-                total += m;
-                if m < force_mass_floor {
-                    held += nodes.force[n] * (1.0 - m / force_mass_floor);
+            let h = if m > mass_floor {
+                if m >= force_mass_floor {
+                    continue;
                 }
+                nodes.force[n] * (1.0 - m / force_mass_floor)
             } else {
-                held += nodes.force[n] + nodes.momentum[n] / dt;
-                if !nodes.body_force.is_empty() {
-                    held += nodes.body_force[n];
-                }
+                let body = match nodes.body_force.is_empty() {
+                    true => Vector::zeros(),
+                    false => nodes.body_force[n],
+                };
+                nodes.force[n] + nodes.momentum[n] / dt + body
+            };
+            if h != Vector::<D>::zeros() {
+                held.push((grid.node_position(grid.node_multi_index(n)), h));
             }
         }
-        if total > 0.0 && held != Vector::<D>::zeros() {
-            let dv = held * (dt / total);
+        let receivers: Vec<(Vector<D>, f64)> = nodes
+            .active
+            .iter()
+            .filter(|&&n| nodes.mass[n] > mass_floor)
+            .map(|&n| (grid.node_position(grid.node_multi_index(n)), nodes.mass[n]))
+            .collect();
+        if let Some((centre, linear, angular)) = rigid_acceleration(&receivers, &held) {
             let GridNodes {
                 mass,
                 velocity,
@@ -126,8 +137,9 @@ pub fn grid_update<const D: usize>(
             let velocity = SharedSlice::new(velocity);
             active.par_iter().for_each(|&n| {
                 if mass[n] > mass_floor {
+                    let r = grid.node_position(grid.node_multi_index(n)) - centre;
                     // SAFETY: `active` lists each node once.
-                    unsafe { *velocity.at(n) += dv };
+                    unsafe { *velocity.at(n) += dt * (linear + angular * r) };
                 }
             });
         }
@@ -135,6 +147,58 @@ pub fn grid_update<const D: usize>(
     let friction = walls.apply_friction(grid, nodes);
     walls.unfold(grid, nodes);
     friction
+}
+
+/// The rigid-body acceleration `a + A (x − x_c)` of the `receivers` (position, mass) whose
+/// force and moment about the origin are those of the `held` forces (position, force):
+/// `Σ m a = Σ f`, and `A` antisymmetric with `Σ m (r ⊗ A r − A r ⊗ r) = Σ (r_f ⊗ f − f ⊗ r_f)`
+/// about the receivers' mass centre `x_c`, that is `A J + J A = Σ (f ⊗ r_f − r_f ⊗ f)`,
+/// `J = Σ m r rᵀ` (in 3D `A = [α]×` with `(tr J − J) α` the torque). Returns `(x_c, a, A)`,
+/// `A` zero where `J` cannot carry it (receivers on one line), None without mass or force.
+fn rigid_acceleration<const D: usize>(
+    receivers: &[(Vector<D>, f64)],
+    held: &[(Vector<D>, Vector<D>)],
+) -> Option<(Vector<D>, Vector<D>, Matrix<D>)> {
+    let total: f64 = receivers.iter().map(|(_, m)| m).sum();
+    if total <= 0.0 || held.is_empty() {
+        return None;
+    }
+    let centre = receivers.iter().map(|(x, m)| x * *m).sum::<Vector<D>>() / total;
+    let force: Vector<D> = held.iter().map(|(_, f)| f).sum();
+    let (mut second, mut torque) = (Matrix::<D>::zeros(), Matrix::<D>::zeros());
+    for (x, m) in receivers {
+        let r = x - centre;
+        second += *m * r * r.transpose();
+    }
+    for (x, f) in held {
+        let r = x - centre;
+        torque += f * r.transpose() - r * f.transpose();
+    }
+    // The antisymmetric unit matrices E_ab (a < b), and the map A ↦ A J + J A on them.
+    let pairs: Vec<(usize, usize)> = (0..D)
+        .flat_map(|a| (a + 1..D).map(move |b| (a, b)))
+        .collect();
+    let unit = |(a, b): (usize, usize)| {
+        let mut e = Matrix::<D>::zeros();
+        e[(b, a)] = 1.0;
+        e[(a, b)] = -1.0;
+        e
+    };
+    let map = DMatrix::from_fn(pairs.len(), pairs.len(), |i, j| {
+        let e = unit(pairs[j]);
+        let image = e * second + second * e;
+        image[(pairs[i].1, pairs[i].0)]
+    });
+    let target = DVector::from_iterator(pairs.len(), pairs.iter().map(|&(a, b)| torque[(b, a)]));
+    let coefficients = map
+        .lu()
+        .solve(&target)
+        .filter(|c| c.iter().all(|c| c.is_finite()));
+    let angular = match coefficients {
+        Some(c) => pairs.iter().zip(c.iter()).map(|(&p, &c)| unit(p) * c).sum(),
+        None => Matrix::zeros(),
+    };
+    Some((centre, force / total, angular))
 }
 
 #[cfg(test)]

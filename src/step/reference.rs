@@ -189,20 +189,25 @@ fn vc_corrections<const D: usize>(
     })
 }
 
-/// VC of order 1: per particle and stencil node the correction
-/// `|Ψ_I| (ζ_I − μ_p)` of `∇Ψ_I(x_p)`, `μ_p = Σ_J |Ψ_J| ζ_J / Σ_J |Ψ_J|`, with `ζ` such that
-/// `Σ_p V_p ∇̂Ψ_I = Σ_b Ψ_I(x_b) n_b a_b` at every node: `K ζ = B − Σ_p V_p ∇Ψ_I`,
-/// `K_IJ = δ_IJ A_I − Σ_p V_p |Ψ_I| |Ψ_J| / W_p`, `A_I = Σ_p V_p |Ψ_I|`, `W_p = Σ_J |Ψ_J|`.
-/// The right-hand side loses its mean over each connected body's nodes (`K`'s null space), and
-/// `ζ` is the solution of least `Σ_I A_I |ζ_I|²` (where the fast step's conjugate gradients,
-/// preconditioned with `A_I` and started from zero, converge), then bounded by
-/// `VC_MAX_CORRECTION / h`.
+/// VC of order 1: per particle and stencil node the correction `|Ψ_I| (ζ_I − f_p(x_I))` of
+/// `∇Ψ_I(x_p)`, `f_p` the weighted least-squares linear fit of the `ζ_J` over the particle's
+/// nodes (weights `|Ψ_J|`; `l_J = [1, (x_J − x_p)/h]`, `G_p = Σ_J |Ψ_J| l_J l_Jᵀ`, its
+/// pseudo-inverse), with `ζ` such that `Σ_p V_p ∇̂Ψ_I = Σ_b Ψ_I(x_b) n_b a_b` at every node:
+/// `K ζ = B − Σ_p V_p ∇Ψ_I`, `K_IJ = δ_IJ A_I − Σ_p V_p |Ψ_I| |Ψ_J| l_Iᵀ G_p⁺ l_J`,
+/// `A_I = Σ_p V_p |Ψ_I|`. The right-hand side loses its least-squares fit by the linear fields
+/// over each connected body's nodes (`K`'s null space; weighted by `A_I`, the fast step's
+/// oblique projection); the system scaled by `A^{-1/2}` is
+/// solved by the pseudo-inverse of its eigenvalues above `VC_NULL_EIGENVALUE` (the solution
+/// of least `Σ_I A_I |ζ_I|²`, where the fast step's conjugate gradients, preconditioned with
+/// `A_I` and started from zero, converge), then bounded by `VC_MAX_CORRECTION / h`.
 fn vc_corrections_first_order<const D: usize>(
     sim: &Sim<D>,
     all_stencils: &[Stencil<D>],
     vc: &VcNodes<'_, D>,
 ) -> Vec<Vec<Vector<D>>> {
     let ps = &sim.particles;
+    let grid = &sim.grid;
+    let h = grid.cell_size;
     let VcNodes {
         surface,
         members,
@@ -211,6 +216,7 @@ fn vc_corrections_first_order<const D: usize>(
         body,
     } = vc;
     let used = row.len();
+    let nodes: Vec<usize> = row.keys().copied().collect();
     let (mut a, mut rhs) = (vec![0.0; used], vec![Vector::<D>::zeros(); used]);
     for (&p, s) in members.iter().zip(stencils) {
         let v = ps.volume(p);
@@ -228,61 +234,105 @@ fn vc_corrections_first_order<const D: usize>(
             }
         }
     }
-    let mut mean = BTreeMap::<usize, (f64, Vector<D>)>::new();
+    // The fit is linear where it is chosen and the shape allows it (`Sim::set_vc_linear_fit`),
+    // else the mean:
+    // `[1, (x − c)/h]` or `[1]` at a node.
+    let fitted = match sim.vc.as_ref().is_some_and(|vc| vc.linear_fit) {
+        true => D + 1,
+        false => 1,
+    };
+    let linear = |i: usize, c: &Vector<D>| -> DVector<f64> {
+        let d = (node_position(grid, nodes[i]) - c) / h;
+        DVector::from_iterator(
+            fitted,
+            std::iter::once(1.0).chain(d.iter().copied()).take(fitted),
+        )
+    };
+    // Per body, the least-squares fit of the right-hand side by the linear fields, removed.
+    let mut centroid = BTreeMap::<usize, (f64, Vector<D>)>::new();
     for i in 0..used {
-        let e = mean.entry(body[i]).or_insert((0.0, Vector::zeros()));
+        let e = centroid.entry(body[i]).or_insert((0.0, Vector::zeros()));
         e.0 += 1.0;
-        e.1 += rhs[i];
+        e.1 += node_position(grid, nodes[i]);
     }
+    let centre = |i: usize| centroid[&body[i]].1 / centroid[&body[i]].0;
+    let mut fit = BTreeMap::<usize, (DMatrix<f64>, DMatrix<f64>)>::new();
     for i in 0..used {
-        let (count, sum) = mean[&body[i]];
-        rhs[i] -= sum / count;
+        let l = linear(i, &centre(i));
+        let e = fit
+            .entry(body[i])
+            .or_insert((DMatrix::zeros(fitted, fitted), DMatrix::zeros(fitted, D)));
+        let w = if fitted > 1 { a[i] } else { 1.0 };
+        e.0 += w * &l * l.transpose();
+        e.1 += &l * DMatrix::from_row_slice(1, D, rhs[i].as_slice());
     }
+    let coefficients: BTreeMap<usize, DMatrix<f64>> = fit
+        .into_iter()
+        .map(|(b, (g, t))| {
+            let tolerance = 1e-12 * g.norm();
+            (b, g.pseudo_inverse(tolerance).expect("an SVD") * t)
+        })
+        .collect();
+    for i in 0..used {
+        let w = if fitted > 1 { a[i] } else { 1.0 };
+        let c = linear(i, &centre(i)).transpose() * &coefficients[&body[i]];
+        rhs[i] -= w * Vector::<D>::from_fn(|k, _| c[k]);
+    }
+    // Per particle: its support `(row, |Ψ|, l)` and `G_p⁺`.
+    type Support = Vec<(usize, f64, DVector<f64>)>;
+    let fits: Vec<(Support, DMatrix<f64>)> = members
+        .iter()
+        .zip(stencils)
+        .map(|(&p, s)| {
+            let support: Support = (0..s.nodes.len())
+                .filter(|&k| in_support(s, k))
+                .map(|k| {
+                    let i = row[&s.nodes[k]];
+                    (i, s.values[k].abs(), linear(i, &ps.position[p]))
+                })
+                .collect();
+            let g = support
+                .iter()
+                .fold(DMatrix::zeros(fitted, fitted), |g, (_, w, l)| {
+                    g + *w * l * l.transpose()
+                });
+            let tolerance = 1e-10 * g[(0, 0)];
+            (support, g.pseudo_inverse(tolerance).expect("an SVD"))
+        })
+        .collect();
     // K.
     let mut k = DMatrix::<f64>::from_diagonal(&DVector::from_vec(a.clone()));
-    for (&p, s) in members.iter().zip(stencils) {
+    for (&p, (support, inverse)) in members.iter().zip(&fits) {
         let v = ps.volume(p);
-        let support: Vec<(usize, f64)> = (0..s.nodes.len())
-            .filter(|&k| in_support(s, k))
-            .map(|k| (row[&s.nodes[k]], s.values[k].abs()))
-            .collect();
-        let weight: f64 = support.iter().map(|&(_, w)| w).sum();
-        for &(i, wi) in &support {
-            for &(j, wj) in &support {
-                k[(i, j)] -= v * wi * wj / weight;
+        for (i, wi, li) in support {
+            for (j, wj, lj) in support {
+                k[(*i, *j)] -= v * wi * wj * (li.transpose() * inverse * lj)[(0, 0)];
             }
         }
     }
-    // Scaled by the preconditioner, `K̃ = P^{-1/2} K P^{-1/2}` (`P = diag(A)`), whose null space
-    // is spanned per body by `v_b = P^{1/2} 1_b`; `K̃ + Σ_b v_b v_bᵀ` is positive definite and
-    // gives the solution orthogonal to them, the one of least `Σ_I A_I |ζ_I|²`.
+    // Scaled by the preconditioner, `K̃ = P^{-1/2} K P^{-1/2}` (`P = diag(A)`), and solved by
+    // the pseudo-inverse of its eigenvalues above `VC_NULL_EIGENVALUE`.
     let scale: Vec<f64> = a
         .iter()
         .map(|&a| if a > 0.0 { 1.0 / a.sqrt() } else { 0.0 })
         .collect();
-    let mut scaled = DMatrix::from_fn(used, used, |i, j| scale[i] * k[(i, j)] * scale[j]);
-    for &b in mean.keys() {
-        let members: Vec<usize> = (0..used).filter(|&i| body[i] == b && a[i] > 0.0).collect();
-        let norm: f64 = members.iter().map(|&i| a[i]).sum();
-        for &i in &members {
-            for &j in &members {
-                scaled[(i, j)] += (a[i] * a[j]).sqrt() / norm;
-            }
-        }
-    }
-    for i in (0..used).filter(|&i| a[i] == 0.0) {
-        scaled[(i, i)] = 1.0;
-    }
-    let factor = scaled.cholesky().expect("K̃ + Σ v vᵀ is positive definite");
+    let scaled = DMatrix::from_fn(used, used, |i, j| scale[i] * k[(i, j)] * scale[j]);
+    let eigen = scaled.symmetric_eigen();
+    let largest = eigen.eigenvalues.amax();
     let mut zeta = vec![Vector::<D>::zeros(); used];
     for c in 0..D {
         let b = DVector::from_iterator(used, (0..used).map(|i| scale[i] * rhs[i][c]));
-        let y = factor.solve(&b);
+        let mut y = DVector::<f64>::zeros(used);
+        for (j, &lambda) in eigen.eigenvalues.iter().enumerate() {
+            if lambda > VC_NULL_EIGENVALUE * largest {
+                let u = eigen.eigenvectors.column(j);
+                y += u * (u.dot(&b) / lambda);
+            }
+        }
         for i in 0..used {
             zeta[i][c] = scale[i] * y[i];
         }
     }
-    let h = sim.grid.cell_size;
     for z in zeta.iter_mut() {
         if z.norm() * h > VC_MAX_CORRECTION {
             *z *= VC_MAX_CORRECTION / (z.norm() * h);
@@ -292,22 +342,20 @@ fn vc_corrections_first_order<const D: usize>(
         .iter()
         .map(|s| vec![Vector::zeros(); s.nodes.len()])
         .collect();
-    for (&p, s) in members.iter().zip(stencils) {
-        corrections[p] = {
-            let support = |k: &usize| in_support(s, *k);
-            let (mut weight, mut mu) = (0.0, Vector::<D>::zeros());
-            for k in (0..s.nodes.len()).filter(support) {
-                weight += s.values[k].abs();
-                mu += s.values[k].abs() * zeta[row[&s.nodes[k]]];
-            }
-            mu /= weight;
-            (0..s.nodes.len())
-                .map(|k| match support(&k) {
-                    true => s.values[k].abs() * (zeta[row[&s.nodes[k]]] - mu),
-                    false => Vector::zeros(),
-                })
-                .collect()
-        };
+    for ((&p, s), (support, inverse)) in members.iter().zip(stencils).zip(&fits) {
+        // The fit's coefficients per direction, `G_p⁺ Σ_J |Ψ_J| l_J ζ_J`.
+        let moments = support
+            .iter()
+            .fold(DMatrix::zeros(fitted, D), |t, (i, w, l)| {
+                t + *w * l * DMatrix::from_row_slice(1, D, zeta[*i].as_slice())
+            });
+        let coefficients = inverse * moments;
+        let mut next = support.iter();
+        for k in (0..s.nodes.len()).filter(|&k| in_support(s, k)) {
+            let (i, w, l) = next.next().expect("the support");
+            let f = l.transpose() * &coefficients;
+            corrections[p][k] = *w * (zeta[*i] - Vector::<D>::from_fn(|c, _| f[c]));
+        }
     }
     corrections
 }
@@ -649,7 +697,8 @@ fn update_grid<const D: usize>(
         .map(|&n| nodes.mass[n])
         .fold(0.0, f64::max);
     let force_floor = if apart { 1e-2 * largest } else { 0.0 };
-    let (mut held, mut total) = (Vector::<D>::zeros(), 0.0);
+    let mut held = Vec::<(Vector<D>, Vector<D>)>::new();
+    let position = |n: usize| node_position(&sim.grid, n);
     for k in 0..nodes.active.len() {
         let n = nodes.active[k];
         let m = nodes.mass[n];
@@ -659,14 +708,15 @@ fn update_grid<const D: usize>(
         };
         if m <= mass_floor {
             if let Some(dt) = dt {
-                held += nodes.force[n] + body + nodes.momentum[n] / dt;
+                held.push((position(n), nodes.force[n] + body + nodes.momentum[n] / dt));
             }
             nodes.velocity[n] = Vector::zeros();
             nodes.velocity_old[n] = Vector::zeros();
             continue;
         }
-        total += m;
-        held += nodes.force[n] * (1.0 - m / force_floor).max(0.0);
+        if m < force_floor {
+            held.push((position(n), nodes.force[n] * (1.0 - m / force_floor)));
+        }
         match dt {
             Some(dt) => {
                 nodes.velocity_old[n] = nodes.momentum[n] / m;
@@ -676,10 +726,55 @@ fn update_grid<const D: usize>(
             None => nodes.velocity[n] = nodes.momentum[n] / m,
         }
     }
-    if let (Some(dt), true) = (dt, apart && !walls.any_wall() && total > 0.0) {
-        for &n in &nodes.active {
-            if nodes.mass[n] > mass_floor {
-                nodes.velocity[n] += held * (dt / total);
+    if let (Some(dt), true) = (dt, apart && !walls.any_wall()) {
+        // The rigid-body velocity field `Σ_j c_j g_j` (the translations and the rotations about
+        // the receivers' mass centre) that does the held forces' work on every rigid mode:
+        // `Σ_I m_I g_j(x_I)·δv_I = Δt Σ_f g_j(x_f)·f`, so that momentum and angular momentum
+        // change by the held forces' sum and moment.
+        let receivers: Vec<usize> = (nodes.active.iter().copied())
+            .filter(|&n| nodes.mass[n] > mass_floor)
+            .collect();
+        let total: f64 = receivers.iter().map(|&n| nodes.mass[n]).sum();
+        let centre = receivers
+            .iter()
+            .map(|&n| nodes.mass[n] * position(n))
+            .sum::<Vector<D>>()
+            / total;
+        let modes = |x: &Vector<D>| -> Vec<Vector<D>> {
+            let x = x - centre;
+            let mut g: Vec<Vector<D>> = (0..D)
+                .map(|k| Vector::<D>::from_fn(|i, _| if i == k { 1.0 } else { 0.0 }))
+                .collect();
+            for a in 0..D {
+                for b in a + 1..D {
+                    let mut r = Vector::<D>::zeros();
+                    r[a] = -x[b];
+                    r[b] = x[a];
+                    g.push(r);
+                }
+            }
+            g
+        };
+        let count = modes(&Vector::zeros()).len();
+        let mut gram = DMatrix::<f64>::zeros(count, count);
+        for &n in &receivers {
+            let g = modes(&position(n));
+            for i in 0..count {
+                for j in 0..count {
+                    gram[(i, j)] += nodes.mass[n] * g[i].dot(&g[j]);
+                }
+            }
+        }
+        let work = DVector::from_iterator(
+            count,
+            (0..count).map(|i| held.iter().map(|(x, f)| modes(x)[i].dot(f)).sum::<f64>()),
+        );
+        if !receivers.is_empty() && !held.is_empty() {
+            let tolerance = 1e-12 * gram.norm();
+            let c = gram.pseudo_inverse(tolerance).expect("an SVD") * work;
+            for &n in &receivers {
+                let g = modes(&position(n));
+                nodes.velocity[n] += dt * (0..count).map(|i| c[i] * g[i]).sum::<Vector<D>>();
             }
         }
     }

@@ -100,7 +100,7 @@ fn tall_column<const D: usize>(transfer: Transfer) -> Sim<D> {
 }
 
 fn angular_momentum_2d(sim: &Sim<2>) -> f64 {
-    let ps = sim.particles();
+    let ps = &sim.particles;
     let mut l = 0.0;
     for p in 0..ps.len() {
         let (x, v) = (ps.position[p], ps.velocity[p]);
@@ -130,21 +130,21 @@ fn step_conserves_mass_and_linear_momentum() {
             for scheme in [Scheme::Usl, Scheme::Musl] {
                 let mut sim = block::<2>(shape, transfer);
                 sim.set_scheme(scheme).unwrap();
-                let p0 = sim.particles().momentum();
-                let m0: f64 = sim.particles().mass.iter().sum();
+                let p0 = sim.particles.momentum();
+                let m0: f64 = sim.particles.mass.iter().sum();
                 let dt = sim.stable_dt(0.3).unwrap();
                 for _ in 0..10 {
                     sim.step(dt)
                         .unwrap_or_else(|e| panic!("{shape:?} {transfer:?} {scheme:?}: {e}"));
                 }
-                let p1 = sim.particles().momentum();
+                let p1 = sim.particles.momentum();
                 // Sums of ~500 terms of size |p0|: round-off ~1e-14 relative; the 1e-10 mass
                 // floor drops no node here (every active node has far more mass).
                 assert!(
                     (p1 - p0).norm() < 1e-12 * p0.norm(),
                     "{shape:?} {transfer:?} {scheme:?}: momentum {p0} -> {p1}"
                 );
-                let m1: f64 = sim.particles().mass.iter().sum();
+                let m1: f64 = sim.particles.mass.iter().sum();
                 assert_eq!(m0, m1);
                 // The nodes keep the last step's sums until the next step clears them (while
                 // it bins): Σ_I m_I = Σ_p m_p (partition of unity; round-off of ~100 terms).
@@ -156,8 +156,8 @@ fn step_conserves_mass_and_linear_momentum() {
                 // No APIC matrices unless APIC runs.
                 let apic = matches!(transfer, Transfer::Apic);
                 assert_eq!(
-                    sim.particles().affine.len(),
-                    if apic { sim.particles().len() } else { 0 }
+                    sim.particles.affine.len(),
+                    if apic { sim.particles.len() } else { 0 }
                 );
             }
         }
@@ -196,12 +196,12 @@ fn mls_conserves_linear_and_angular_momentum() {
         for scheme in [Scheme::Usl, Scheme::Musl] {
             let mut sim = block::<2>(shape, Transfer::Mls);
             sim.set_scheme(scheme).unwrap();
-            let (p0, l0) = (sim.particles().momentum(), angular_momentum_2d(&sim));
+            let (p0, l0) = (sim.particles.momentum(), angular_momentum_2d(&sim));
             let dt = sim.stable_dt(0.3).unwrap();
             for _ in 0..20 {
                 sim.step(dt).unwrap();
             }
-            let (p1, l1) = (sim.particles().momentum(), angular_momentum_2d(&sim));
+            let (p1, l1) = (sim.particles.momentum(), angular_momentum_2d(&sim));
             // The bounds of the APIC tests above: sums of ~500 terms, round-off ~1e-14 relative.
             assert!(
                 (p1 - p0).norm() < 1e-12 * p0.norm(),
@@ -211,7 +211,7 @@ fn mls_conserves_linear_and_angular_momentum() {
                 (l1 - l0).abs() < 1e-10 * l0.abs(),
                 "{shape:?} {scheme:?}: angular momentum {l0} -> {l1}"
             );
-            assert_eq!(sim.particles().affine.len(), sim.particles().len());
+            assert_eq!(sim.particles.affine.len(), sim.particles.len());
         }
     }
 }
@@ -226,7 +226,7 @@ fn mls_velocity_gradient_is_exact_for_an_affine_field() {
         let mut sim = block::<D>(shape, Transfer::Mls);
         let a = Matrix::<D>::from_fn(|i, j| 0.3 * (i as f64 + 1.0) - 0.2 * j as f64);
         let c = Vector::<D>::from_element(0.05);
-        let x = sim.particles().position.clone();
+        let x = sim.particles.position.clone();
         let ps = &mut sim.particles;
         for ((v, c_p), x) in ps.velocity.iter_mut().zip(&mut ps.affine).zip(&x) {
             *v = a * x + c;
@@ -234,7 +234,7 @@ fn mls_velocity_gradient_is_exact_for_an_affine_field() {
         }
         let dt = 1e-3;
         sim.step(dt).unwrap();
-        let ps = sim.particles();
+        let ps = &sim.particles;
         let f = Matrix::<D>::identity() + dt * a;
         // Round-off of sums of O(1) terms; a first-order error would be O(h) = 0.1 here.
         let tol = 1e-12;
@@ -279,11 +279,11 @@ fn mls_is_refused_without_a_quadratic_or_cubic_bspline_or_with_vc() {
             sim.set_integration(crate::sim::Integration::Vc { order: 1 })
                 .unwrap();
         }
-        let before = sim.particles().clone();
+        let before = sim.particles.clone();
         let e = sim.step(1e-4).unwrap_err();
         assert_eq!(e.kind, ErrorKind::Unsupported, "{shape:?} vc {vc}: {e}");
         assert!(e.message.contains("MLS"), "{e}");
-        assert_eq!(sim.particles(), &before);
+        assert_eq!(sim.particles, before);
         assert_eq!(sim.steps(), 0);
     }
 }
@@ -314,8 +314,8 @@ fn slip_and_friction_floors() {
         for _ in 0..steps {
             sim.step(dt).unwrap();
         }
-        let mass: f64 = sim.particles().mass.iter().sum();
-        (sim.particles().momentum()[0] / mass, sim.time())
+        let mass: f64 = sim.particles.mass.iter().sum();
+        (sim.particles.momentum()[0] / mass, sim.time())
     };
     let (v_slip, _) = run(Wall::Slip);
     assert!(
@@ -355,7 +355,7 @@ fn fixed_floor_holds_a_block() {
     while sim.time() < 0.5 {
         sim.step(dt).unwrap();
     }
-    let ps = sim.particles();
+    let ps = &sim.particles;
     assert!(ps.position.iter().all(|x| x[1] >= 0.0));
     // Free fall for 0.5 s would give 5 m/s; resting on the floor gives elastic oscillation
     // of order g·(period) ≈ 10 · 0.01 m/s.
@@ -370,13 +370,13 @@ fn rejected_steps_keep_the_last_good_state() {
     let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
     let dt = sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
-    let before = sim.particles().clone();
+    let before = sim.particles.clone();
     let (t, n) = (sim.time(), sim.steps());
 
     // dt far above the critical step.
     let e = sim.step(100.0 * dt).unwrap_err();
     assert_eq!(e.kind, ErrorKind::UnstableTimeStep);
-    assert_eq!(sim.particles(), &before);
+    assert_eq!(sim.particles, before);
 
     // A body force that fails, and one that returns NaN.
     sim.set_body_force(Some(Box::new(
@@ -416,7 +416,7 @@ fn rejected_steps_keep_the_last_good_state() {
     )));
     assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
 
-    assert_eq!(sim.particles(), &before);
+    assert_eq!(sim.particles, before);
     assert_eq!((sim.time(), sim.steps()), (t, n));
     // And the simulation still steps afterwards, from a cleared grid: as one that never saw
     // the rejected steps.
@@ -425,7 +425,7 @@ fn rejected_steps_keep_the_last_good_state() {
     let mut fresh = block::<2>(Shape::BSpline2, Transfer::Apic);
     fresh.step(dt).unwrap();
     fresh.step(dt).unwrap();
-    assert_eq!(sim.particles(), fresh.particles());
+    assert_eq!(sim.particles, fresh.particles);
 }
 
 /// Spacing of [`block_by_columns`]: two particles per cell of the 32 × 32 unit grid.
@@ -466,10 +466,10 @@ fn a_rejected_sorting_step_names_the_particle_by_id() {
         let dt = sim.stable_dt(0.3).unwrap();
         sim.work.signal_speed = Some(sim.signal_speed());
         sim.particles.velocity[52] = Vector::<2>::new(1e9, 0.0);
-        let before = sim.particles().clone();
+        let before = sim.particles.clone();
         let e = sim.step(dt).unwrap_err();
         assert_eq!(e.kind, ErrorKind::OutsideGrid, "{e}");
-        assert_eq!(sim.particles(), &before);
+        assert_eq!(sim.particles, before);
         let after = e.message.split("particle ").nth(1).unwrap();
         let id: usize = after.split(' ').next().unwrap().parse().unwrap();
         (id, sim.work.reorder, sim.work.bins.order.clone())
@@ -486,7 +486,7 @@ fn a_rejected_sorting_step_names_the_particle_by_id() {
 #[test]
 fn inverted_particles_are_refused() {
     let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
-    let before = sim.particles().clone();
+    let before = sim.particles.clone();
     let dt = sim.stable_dt(0.3).unwrap();
     let k = 3.0 / (dt * dt);
     sim.set_body_force(Some(Box::new(
@@ -499,7 +499,7 @@ fn inverted_particles_are_refused() {
     )));
     let e = sim.step(dt).unwrap_err();
     assert_eq!(e.kind, ErrorKind::InvertedParticle, "{e}");
-    assert_eq!(sim.particles(), &before);
+    assert_eq!(sim.particles, before);
 }
 
 #[test]
@@ -551,13 +551,13 @@ fn add_particles_is_all_or_nothing() {
             sim.add_particles(mat, &x, &vol, None).unwrap_err().kind,
             kind
         );
-        assert_eq!(sim.particles().len(), 0);
+        assert_eq!(sim.particles.len(), 0);
     }
     sim.add_particles(m, &[good], &[0.1], None).unwrap();
-    assert_eq!(sim.particles().len(), 1);
-    assert_eq!(sim.particles().mass[0], 0.1);
+    assert_eq!(sim.particles.len(), 1);
+    assert_eq!(sim.particles.mass[0], 0.1);
     assert_eq!(
-        sim.particles().deformation_gradient[0],
+        sim.particles.deformation_gradient[0],
         Matrix::<2>::identity()
     );
 }
@@ -577,12 +577,12 @@ fn rk_shape_functions_slot_into_the_step() {
         (1.6, Transfer::PicFlip { flip: 0.0 }),
     ] {
         let mut sim = block::<2>(Shape::Rk { order: 1, support }, transfer);
-        let p0 = sim.particles().momentum();
+        let p0 = sim.particles.momentum();
         let dt = sim.stable_dt(0.3).unwrap();
         for _ in 0..10 {
             sim.step(dt).unwrap();
         }
-        let p1 = sim.particles().momentum();
+        let p1 = sim.particles.momentum();
         assert!(
             (p1 - p0).norm() < 1e-12 * p0.norm(),
             "RK ã = {support}: {p0} -> {p1}"
@@ -663,7 +663,7 @@ fn results_do_not_depend_on_the_thread_count() {
             for _ in 0..steps {
                 sim.step(dt).unwrap();
             }
-            (sim.particles().clone(), sim.work.bins.tasks.len())
+            (sim.particles.clone(), sim.work.bins.tasks.len())
         })
     }
     fn run<const D: usize>(
@@ -744,13 +744,13 @@ fn results_do_not_depend_on_the_instruction_set() {
         }
         if plastic {
             let yielded = sim
-                .particles()
+                .particles
                 .history
                 .iter()
                 .filter(|s| s.plastic_strain > 0.0);
             assert!(yielded.count() > 0, "the soil block did not yield");
         }
-        sim.particles().clone()
+        sim.particles.clone()
     }
     if !crate::cpu::Lanes::detect().avx2() {
         eprintln!("no AVX2 and FMA here: both runs take the baseline code");
@@ -916,11 +916,11 @@ fn rk2_lumping_at_the_edge_of_a_body() {
     sim.step(dt).unwrap();
     let mut shape_only = Stencils::<2>::default();
     let shape = rk2.build::<2>().unwrap();
-    shape_only.compute(shape.as_ref(), &sim.grid, &sim.particles().position);
+    shape_only.compute(shape.as_ref(), &sim.grid, &sim.particles.position);
     let st = &sim.work.stencils;
     let mut mass = std::collections::HashMap::<usize, [f64; 3]>::new();
     let mut blended = 0;
-    for p in 0..sim.particles().len() {
+    for p in 0..sim.particles.len() {
         let (ns, ws, _) = shape_only.of(p);
         let phi = &st.transfer[p * st.len..(p + 1) * st.len];
         let ls = shape_only
@@ -931,9 +931,9 @@ fn rk2_lumping_at_the_edge_of_a_body() {
         blended += usize::from(phi != ws);
         for s in 0..ns.len() {
             let e = mass.entry(ns[s]).or_default();
-            e[0] += sim.particles().mass[p] * ws[s];
-            e[1] += sim.particles().mass[p] * ls[s];
-            e[2] += sim.particles().mass[p] * phi[s];
+            e[0] += sim.particles.mass[p] * ws[s];
+            e[1] += sim.particles.mass[p] * ls[s];
+            e[2] += sim.particles.mass[p] * phi[s];
         }
     }
     let lowest = |k: usize| mass.values().map(|m| m[k]).fold(f64::INFINITY, f64::min);
@@ -950,7 +950,7 @@ fn rk2_lumping_at_the_edge_of_a_body() {
     );
     // The 4 × 4-cell block has no node more than two cells from its edge: every particle sees
     // a blended node.
-    assert_eq!(blended, sim.particles().len());
+    assert_eq!(blended, sim.particles.len());
 
     // Free fall from rest: v = g t, F = I and no stress for every particle, to round-off.
     let mut sim = block_moving::<2>(rk2, pic, false);
@@ -960,7 +960,7 @@ fn rk2_lumping_at_the_edge_of_a_body() {
         sim.step(dt).unwrap();
     }
     let g = Vector::<2>::new(0.0, -9.81 * sim.time());
-    let ps = sim.particles();
+    let ps = &sim.particles;
     for p in 0..ps.len() {
         // |v| ≈ 0.1 m/s after 20 steps; round-off of the sums is 1e-16 relative per step.
         assert!((ps.velocity[p] - g).norm() < 1e-14, "{}", ps.velocity[p]);
@@ -970,11 +970,11 @@ fn rk2_lumping_at_the_edge_of_a_body() {
     // Momentum of the spinning block under PIC, over 100 steps: round-off (each step's sums
     // are exact to about 1e-16 relative).
     let mut sim = block::<2>(rk2, pic);
-    let p0 = sim.particles().momentum();
+    let p0 = sim.particles.momentum();
     for _ in 0..100 {
         sim.step(dt).unwrap();
     }
-    let drift = (sim.particles().momentum() - p0).norm() / p0.norm();
+    let drift = (sim.particles.momentum() - p0).norm() / p0.norm();
     eprintln!("RK2 spinning block: relative momentum drift over 100 steps {drift:e}");
     assert!(drift < 1e-13, "momentum drift {drift:e}");
 }
@@ -1005,7 +1005,7 @@ fn factored_and_stored_stencils_agree_to_round_off() {
         for _ in 0..8 {
             sim.step(dt).unwrap();
         }
-        sim.particles().clone()
+        sim.particles.clone()
     }
     fn close<const D: usize>(a: &Particles<D>, b: &Particles<D>, what: &str) {
         let fields: [(&str, Vec<f64>, Vec<f64>); 6] = [
@@ -1353,9 +1353,9 @@ fn sorting_the_particles_changes_only_round_off() {
         sim
     };
     let (sorted, unsorted) = (run(true), run(false));
-    assert!(unsorted.particles().in_id_order());
+    assert!(unsorted.particles.in_id_order());
     assert!(
-        !sorted.particles().in_id_order(),
+        !sorted.particles.in_id_order(),
         "the particles were not sorted"
     );
     assert!(!sorted.work.bins.is_scattered(crate::cpu::Lanes::baseline()));
@@ -1415,16 +1415,16 @@ fn sorting_in_grid_to_particle_is_sorting_at_the_commit() {
         "{in_gather} sorts in grid to particle"
     );
     assert!(
-        !gathered.particles().in_id_order(),
+        !gathered.particles.in_id_order(),
         "the particles were not sorted"
     );
     let yielded = gathered
-        .particles()
+        .particles
         .history
         .iter()
         .filter(|s| s.plastic_strain > 0.0);
     assert!(yielded.count() > 0, "the soil did not yield");
-    assert_eq!(gathered.particles(), committed.particles());
+    assert_eq!(gathered.particles, committed.particles);
 }
 
 /// A step computes `max_p (c_p + |v_p|)` of the new state while it has it in registers, and the
@@ -1518,7 +1518,7 @@ fn nodes_lighter_than_the_mass_floor_get_no_velocity() {
         )
         .unwrap();
         sim.step(1e-4).unwrap();
-        let ps = sim.particles();
+        let ps = &sim.particles;
         let p = ps.material.iter().position(|&m| m == dust).unwrap();
         ps.velocity[p]
     }
@@ -1563,7 +1563,7 @@ fn the_body_force_is_called_on_the_thread_that_steps() {
             sim.step(dt).unwrap();
         }
         let seen = seen.lock().unwrap().clone();
-        (seen, sim.particles().clone())
+        (seen, sim.particles.clone())
     }
     let here = std::thread::current().id();
     let (seen, alone) = step_on_this_thread();

@@ -214,7 +214,7 @@ impl Penetration {
         let back = self.space_below * self.plate_thickness;
         let ps = sim.particles();
         let h = sim.grid().cell_size;
-        let joined = joined_to_the_clamp(ps, 0, h / 2.0, self.plate_half_width - h / 2.0);
+        let joined = joined_to_the_clamp(&ps, 0, h / 2.0, self.plate_half_width - h / 2.0);
         let across = |x: &Vector<D>| x.rows(0, D - 1).norm();
         let (mut vsum, mut msum, mut lowest) = (0.0, 0.0, f64::INFINITY);
         let (mut failed, mut max_damage) = (0, 0.0f64);
@@ -412,7 +412,7 @@ mod tests {
         let q = sim.grid().cell_size / 2.0;
         let clamp = scene.plate_half_width - q;
         let r = scene.projectile_radius;
-        let intact = sim.particles().clone();
+        let intact = sim.particles();
         let plate = |ps: &Particles<2>| (0..ps.len()).filter(|&p| ps.material[p] == 0).count();
         let count = |joined: &[bool], inside: bool| {
             (0..intact.len())
