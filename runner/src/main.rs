@@ -87,6 +87,9 @@ struct RunArgs {
     /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
     #[arg(long)]
     cfl: Option<f64>,
+    /// Overrides the scene's run.max_steps (the most steps the run may take; default 10^9).
+    #[arg(long)]
+    max_steps: Option<u64>,
     /// Overrides the scene's run.png: at the end, write <out>/<output>.png, the particles
     /// coloured by this field (velocity, displacement, stress, pressure, volume, mass,
     /// deformation_gradient, plastic_strain, damage, material); `none` writes no picture.
@@ -268,6 +271,9 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(c) = args.cfl {
         scene.run.cfl = c;
     }
+    if let Some(n) = args.max_steps {
+        scene.run.max_steps = n;
+    }
     if let Some(f) = &args.vtk {
         scene.run.vtk = match f.as_str() {
             "ascii" => rkmpm::options::VtkFormat::Ascii,
@@ -400,9 +406,24 @@ fn run_scene<const D: usize>(
     if run.frames > 0 {
         frame(&mut series, sim)?;
     }
+    let steps0 = sim.steps();
     for k in 1..=chunks {
         let target = end * k as f64 / chunks as f64;
         if target > sim.time() {
+            // run.max_steps bounds the whole run: each chunk may take what is left of it.
+            let left = run.max_steps.saturating_sub(sim.steps() - steps0);
+            if left == 0 {
+                bar.abandon();
+                return Err(format!(
+                    "the run stopped after step {} at t = {:e} s (end time {end:e} s): it took \
+                     run.max_steps = {} steps (raise it with --max-steps if so long a run is \
+                     meant)",
+                    sim.steps(),
+                    sim.time(),
+                    run.max_steps
+                ));
+            }
+            sim.set_max_steps_per_advance(left).map_err(|e| e.message)?;
             sim.advance(target - sim.time(), run.cfl).map_err(|e| {
                 bar.abandon();
                 format!(
