@@ -538,7 +538,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_contact(
     })
 }
 
-/// Adds a rigid body material: `density` >= 1e-6 kg/m^3 and the prescribed constant
+/// Adds a rigid body material: `density` >= 1e-20 kg/m^3 and the prescribed constant
 /// `velocity` (`dim` values). Its particles move with that velocity and do not deform; it needs
 /// contact (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
 ///
@@ -767,7 +767,7 @@ unsafe fn add_material(
 
 /// Adds a small-strain linear elastic material (density > 0, Young's modulus > 0,
 /// -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`. Every material is refused, with
-/// its reason, outside any physical range (SI units): a density below 1e-6 kg/m^3, or a
+/// its reason, outside any physical range (SI units): a density below 1e-20 kg/m^3, or a
 /// dilatational wave speed `sqrt((lambda + 2 mu) / density)` above 1e5 m/s (the fastest solid,
 /// diamond, is about 1.8e4 m/s), whose stable step no run could get through.
 ///
