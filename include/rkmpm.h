@@ -30,6 +30,12 @@
 #define RKMPM_ABI_VERSION 1
 
 /**
+ * The bound on the steps of one `rkmpm_sim_advance` of a new (or loaded) simulation;
+ * `rkmpm_sim_set_max_steps_per_advance` changes it.
+ */
+#define RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE 1000000000
+
+/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -587,9 +593,9 @@ enum RkmpmStatus rkmpm_sim_set_transfer(struct RkmpmSim *sim,
 enum RkmpmStatus rkmpm_sim_set_contact(struct RkmpmSim *sim, uint32_t enabled, double friction);
 
 /**
- * Adds a rigid body material: `density` > 0 and the prescribed constant `velocity` (`dim`
- * values). Its particles move with that velocity and do not deform; it needs contact
- * (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
+ * Adds a rigid body material: `density` >= 1e-20 kg/m^3 and the prescribed constant
+ * `velocity` (`dim` values). Its particles move with that velocity and do not deform; it needs
+ * contact (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
  *
  * # Safety
  * `sim` must be a live handle; `velocity` must hold `dim` values; `out_id` valid for a write.
@@ -663,7 +669,10 @@ enum RkmpmStatus rkmpm_sim_set_progress(struct RkmpmSim *sim, RkmpmProgressFn f,
 
 /**
  * Adds a small-strain linear elastic material (density > 0, Young's modulus > 0,
- * -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`.
+ * -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`. Every material is refused, with
+ * its reason, outside any physical range (SI units): a density below 1e-20 kg/m^3, or a
+ * dilatational wave speed `sqrt((lambda + 2 mu) / density)` above 1e5 m/s (the fastest solid,
+ * diamond, is about 1.8e4 m/s), whose stable step no run could get through.
  *
  * # Safety
  * `sim` must be a live handle; `out_id` valid for a write.
@@ -805,6 +814,14 @@ enum RkmpmStatus rkmpm_sim_step(struct RkmpmSim *sim, double dt);
  * step (earlier steps of this call stay taken) and the message says how many steps were taken
  * and where it stopped. Invalid `duration` or `cfl` change nothing.
  *
+ * The steps of one call are bounded (`rkmpm_sim_set_max_steps_per_advance`, default
+ * `RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE`, 10^9): a run whose estimate `duration /
+ * stable_dt(cfl)` exceeds the bound is refused before its first step with
+ * `RKMPM_ERR_INVALID_ARGUMENT` and a message giving the estimate (nothing changes); a run whose
+ * stable step shrinks on the way stops with the same status once it has taken the bound's
+ * number of steps (they stay taken). To stop a run earlier by its own measure (wall time, a
+ * cancel request), a host returns non-zero from the progress callback (`rkmpm_sim_set_progress`).
+ *
  * # Safety
  * `sim` must be a live handle; `out_steps` NULL or valid for a write.
  */
@@ -812,6 +829,26 @@ enum RkmpmStatus rkmpm_sim_advance(struct RkmpmSim *sim,
                                    double duration,
                                    double cfl,
                                    uint64_t *out_steps);
+
+/**
+ * Bounds the steps one `rkmpm_sim_advance` may take: `max_steps` >= 1 (default
+ * `RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE`, 10^9; `UINT64_MAX` for no practical bound). Raise it
+ * for a run meant to be that long. May change between steps; not part of a checkpoint (a loaded
+ * simulation has the default).
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_max_steps_per_advance(struct RkmpmSim *sim, uint64_t max_steps);
+
+/**
+ * Writes the bound on the steps of one `rkmpm_sim_advance` to `*out_max_steps`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_max_steps` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
+                                                 uint64_t *out_max_steps);
 
 /**
  * Writes the kinetic, stored and gravitational energies of the particles to `*out`.

@@ -40,6 +40,9 @@ module rkmpm
    !> rkmpm_library_abi_version(). (The C macro RKMPM_ABI_VERSION cannot keep its name in
    !> Fortran: names are case-insensitive and rkmpm_abi_version is the C function.)
    integer(c_int32_t), parameter, public :: RKMPM_BINDING_ABI_VERSION = 1
+   ! The bound on the steps of one advance of a new (or loaded) simulation
+   ! (sim%set_max_steps_per_advance changes it).
+   integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE = 1000000000
 
    ! enum RkmpmStatus (a C enum: int-sized)
    integer(c_int), parameter, public :: RKMPM_OK = 0
@@ -218,6 +221,8 @@ module rkmpm
       procedure :: stable_dt => sim_stable_dt
       procedure :: step => sim_step
       procedure :: advance => sim_advance
+      procedure :: set_max_steps_per_advance => sim_set_max_steps_per_advance
+      procedure :: max_steps_per_advance => sim_max_steps_per_advance
       procedure :: time => sim_time
       procedure :: energies => sim_energies
       procedure :: momenta => sim_momenta
@@ -522,6 +527,24 @@ module rkmpm
          real(c_double), value :: duration, cfl
          integer(c_int64_t), intent(out) :: out_steps
       end function rkmpm_sim_advance
+
+      ! enum RkmpmStatus rkmpm_sim_set_max_steps_per_advance(struct RkmpmSim *sim,
+      !                                                    uint64_t max_steps);
+      integer(c_int) function rkmpm_sim_set_max_steps_per_advance(sim, max_steps) &
+            bind(C, name="rkmpm_sim_set_max_steps_per_advance")
+         import :: c_int, c_ptr, c_int64_t
+         type(c_ptr), value :: sim
+         integer(c_int64_t), value :: max_steps
+      end function rkmpm_sim_set_max_steps_per_advance
+
+      ! enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
+      !                                                uint64_t *out_max_steps);
+      integer(c_int) function rkmpm_sim_max_steps_per_advance(sim, out_max_steps) &
+            bind(C, name="rkmpm_sim_max_steps_per_advance")
+         import :: c_int, c_ptr, c_int64_t
+         type(c_ptr), value :: sim
+         integer(c_int64_t), intent(out) :: out_max_steps
+      end function rkmpm_sim_max_steps_per_advance
 
       ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
       integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
@@ -1246,6 +1269,38 @@ contains
       if (present(steps)) steps = n
       if (present(errmsg)) errmsg = text
    end subroutine sim_advance
+
+   !> Bounds the steps one advance may take (default RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE, 10^9):
+   !> a run whose estimate duration / stable step exceeds it is refused before its first step
+   !> with RKMPM_ERR_INVALID_ARGUMENT and the estimate in the message; a run whose stable step
+   !> shrinks on the way stops there once it has taken max_steps steps (they stay taken).
+   !> max_steps < 1 is refused; huge(0_c_int64_t) sets no practical bound. To stop a run
+   !> earlier by its own measure, a host returns non-zero from the progress callback
+   !> (set_progress). Not part of a checkpoint.
+   subroutine sim_set_max_steps_per_advance(self, max_steps, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int64_t), intent(in) :: max_steps
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      ! C takes an unsigned count: a negative one is passed as 0, which C refuses.
+      call report(rkmpm_sim_set_max_steps_per_advance(self%h, max(max_steps, 0_c_int64_t)), &
+         'set_max_steps_per_advance', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_max_steps_per_advance
+
+   !> The bound on the steps of one advance.
+   integer(c_int64_t) function sim_max_steps_per_advance(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int64_t) :: n
+      n = 0
+      call report(rkmpm_sim_max_steps_per_advance(self%h, n), 'max_steps_per_advance', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_max_steps_per_advance = n
+   end function sim_max_steps_per_advance
 
    !> The energies of the particles now.
    type(rkmpm_energies) function sim_energies(self, stat, errmsg)

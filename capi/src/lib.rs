@@ -29,6 +29,12 @@ use RkmpmStatus::*;
 /// Version of the binary interface; changes whenever a signature, a struct or an enum value changes.
 pub const RKMPM_ABI_VERSION: u32 = 1;
 
+/// The bound on the steps of one `rkmpm_sim_advance` of a new (or loaded) simulation;
+/// `rkmpm_sim_set_max_steps_per_advance` changes it.
+pub const RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE: u64 = 1_000_000_000;
+const _: () =
+    assert!(RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE == rkmpm::sim::DEFAULT_MAX_STEPS_PER_ADVANCE);
+
 /// Shape function (`rkmpm_sim_set_shape`).
 pub type RkmpmShape = u32;
 /// Linear hats (standard MPM).
@@ -533,9 +539,9 @@ pub unsafe extern "C" fn rkmpm_sim_set_contact(
     })
 }
 
-/// Adds a rigid body material: `density` > 0 and the prescribed constant `velocity` (`dim`
-/// values). Its particles move with that velocity and do not deform; it needs contact
-/// (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
+/// Adds a rigid body material: `density` >= 1e-20 kg/m^3 and the prescribed constant
+/// `velocity` (`dim` values). Its particles move with that velocity and do not deform; it needs
+/// contact (`rkmpm_sim_set_contact`), through which it pushes the other bodies.
 ///
 /// # Safety
 /// `sim` must be a live handle; `velocity` must hold `dim` values; `out_id` valid for a write.
@@ -761,7 +767,10 @@ unsafe fn add_material(
 }
 
 /// Adds a small-strain linear elastic material (density > 0, Young's modulus > 0,
-/// -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`.
+/// -1 < Poisson's ratio < 0.5) and writes its id to `*out_id`. Every material is refused, with
+/// its reason, outside any physical range (SI units): a density below 1e-20 kg/m^3, or a
+/// dilatational wave speed `sqrt((lambda + 2 mu) / density)` above 1e5 m/s (the fastest solid,
+/// diamond, is about 1.8e4 m/s), whose stable step no run could get through.
 ///
 /// # Safety
 /// `sim` must be a live handle; `out_id` valid for a write.
@@ -1132,6 +1141,14 @@ pub unsafe extern "C" fn rkmpm_sim_step(sim: *mut RkmpmSim, dt: f64) -> RkmpmSta
 /// step (earlier steps of this call stay taken) and the message says how many steps were taken
 /// and where it stopped. Invalid `duration` or `cfl` change nothing.
 ///
+/// The steps of one call are bounded (`rkmpm_sim_set_max_steps_per_advance`, default
+/// `RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE`, 10^9): a run whose estimate `duration /
+/// stable_dt(cfl)` exceeds the bound is refused before its first step with
+/// `RKMPM_ERR_INVALID_ARGUMENT` and a message giving the estimate (nothing changes); a run whose
+/// stable step shrinks on the way stops with the same status once it has taken the bound's
+/// number of steps (they stay taken). To stop a run earlier by its own measure (wall time, a
+/// cancel request), a host returns non-zero from the progress callback (`rkmpm_sim_set_progress`).
+///
 /// # Safety
 /// `sim` must be a live handle; `out_steps` NULL or valid for a write.
 #[no_mangle]
@@ -1162,6 +1179,44 @@ pub unsafe extern "C" fn rkmpm_sim_advance(
         }
         result?;
         Ok(())
+    })
+}
+
+/// Bounds the steps one `rkmpm_sim_advance` may take: `max_steps` >= 1 (default
+/// `RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE`, 10^9; `UINT64_MAX` for no practical bound). Raise it
+/// for a run meant to be that long. May change between steps; not part of a checkpoint (a loaded
+/// simulation has the default).
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_max_steps_per_advance(
+    sim: *mut RkmpmSim,
+    max_steps: u64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_max_steps_per_advance", || {
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        with_sim!(&mut s.sim, m => m.set_max_steps_per_advance(max_steps))?;
+        Ok(())
+    })
+}
+
+/// Writes the bound on the steps of one `rkmpm_sim_advance` to `*out_max_steps`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_max_steps` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_max_steps_per_advance(
+    sim: *const RkmpmSim,
+    out_max_steps: *mut u64,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_max_steps_per_advance", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let max = with_sim!(&s.sim, m => m.max_steps_per_advance());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_max_steps", out_max_steps, max) }
     })
 }
 

@@ -916,6 +916,37 @@ static void lifetime_rows(void) {
     CALL(f.sim, rkmpm_sim_step_count(f.sim, misaligned(raw)));
     drop(&f);
   }
+  ROW("set_max_steps_per_advance.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_max_steps_per_advance(NULL, 10));
+  }
+  ROW("set_max_steps_per_advance.zero", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_max_steps_per_advance(f.sim, 123));
+    CALL(f.sim, rkmpm_sim_set_max_steps_per_advance(f.sim, 0));
+    uint64_t bound = 0;
+    RKMPM_CHECK(rkmpm_sim_max_steps_per_advance(f.sim, &bound));
+    EXPECT(bound == 123, "the bound is %llu", (unsigned long long)bound);
+    drop(&f);
+  }
+  ROW("max_steps_per_advance.null_sim", RKMPM_ERR_NULL_POINTER) {
+    uint64_t n = 77;
+    CALL(NULL, rkmpm_sim_max_steps_per_advance(NULL, &n));
+    EXPECT(n == 77, "wrote the output after a failure");
+  }
+  ROW("max_steps_per_advance.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_max_steps_per_advance(f.sim, NULL));
+    uint64_t bound = 0;
+    RKMPM_CHECK(rkmpm_sim_max_steps_per_advance(f.sim, &bound));
+    EXPECT(bound == RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE, "the default bound is %llu",
+           (unsigned long long)bound);
+    drop(&f);
+  }
+  ROW("max_steps_per_advance.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_max_steps_per_advance(f.sim, misaligned(raw)));
+    drop(&f);
+  }
 }
 
 static void option_rows(void) {
@@ -1243,6 +1274,13 @@ static void material_rows(void) {
     linear_elastic_rejects(1.0, 1e308, 0.49);  /* lambda overflows */
     linear_elastic_rejects(1e-300, 1e300, 0.3); /* the wave speed overflows */
   }
+  ROW("add_material_linear_elastic.faster_than_any_solid", RKMPM_ERR_INVALID_ARGUMENT) {
+    linear_elastic_rejects(1000.0, 1e300, 0.3); /* 3.7e148 m/s */
+    linear_elastic_rejects(1.0, 1e10, 0.3);     /* 1.2e5 m/s */
+  }
+  ROW("add_material_linear_elastic.density_below_bound", RKMPM_ERR_INVALID_ARGUMENT) {
+    linear_elastic_rejects(1e-300, 1e-300, 0.3);
+  }
 
   /* ---- rkmpm_sim_add_material_neo_hookean ---- */
   ROW("add_material_neo_hookean.null_sim", RKMPM_ERR_NULL_POINTER) {
@@ -1292,6 +1330,13 @@ static void material_rows(void) {
   ROW("add_material_neo_hookean.derived_overflow", RKMPM_ERR_INVALID_ARGUMENT) {
     neo_hookean_rejects(1.0, 1e308, 0.49);
     neo_hookean_rejects(1e-300, 1e300, 0.3);
+  }
+  ROW("add_material_neo_hookean.faster_than_any_solid", RKMPM_ERR_INVALID_ARGUMENT) {
+    neo_hookean_rejects(1000.0, 1e300, 0.3);
+    neo_hookean_rejects(1.0, 1e10, 0.3);
+  }
+  ROW("add_material_neo_hookean.density_below_bound", RKMPM_ERR_INVALID_ARGUMENT) {
+    neo_hookean_rejects(1e-300, 1e-300, 0.3);
   }
 
   /* ---- rkmpm_sim_add_material_drucker_prager ---- */
@@ -1347,6 +1392,9 @@ static void material_rows(void) {
   }
   ROW("add_material_drucker_prager.derived_overflow", RKMPM_ERR_INVALID_ARGUMENT) {
     drucker_prager_rejects(1.0, 1e308, 0.49, 30.0, 0.0, 0.0);
+  }
+  ROW("add_material_drucker_prager.faster_than_any_solid", RKMPM_ERR_INVALID_ARGUMENT) {
+    drucker_prager_rejects(2650.0, 1e300, 0.3, 30.0, 0.0, 0.0);
   }
 
   /* ---- rkmpm_sim_set_drucker_prager_rheology ---- */
@@ -1580,6 +1628,10 @@ static void material_rows(void) {
   }
   ROW("add_material_rigid.density_infinite", RKMPM_ERR_INVALID_ARGUMENT) {
     rigid_rejects(3, INFINITY, still);
+  }
+  ROW("add_material_rigid.density_below_bound", RKMPM_ERR_INVALID_ARGUMENT) {
+    const double still[3] = {0.0, 0.0, 0.0};
+    rigid_rejects(2, 1e-300, still);
   }
   ROW("add_material_rigid.velocity_nan", RKMPM_ERR_INVALID_ARGUMENT) {
     const double v2[2] = {0.0, NAN}, v3[3] = {0.0, 0.0, NAN};
@@ -2169,6 +2221,23 @@ static void step_rows(void) {
     uint64_t n = 77;
     CALL(f.sim, rkmpm_sim_advance(f.sim, 1e-2, 0.5, &n));
     EXPECT(n == 0, "wrote %llu steps", (unsigned long long)n);
+    drop(&f);
+  }
+  ROW("advance.estimate_above_bound", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    uint64_t n = 77;
+    CALL(f.sim, rkmpm_sim_advance(f.sim, 1e300, 0.5, &n));
+    EXPECT(n == 0, "wrote %llu steps", (unsigned long long)n);
+    char message[512];
+    rkmpm_last_error_message(message, sizeof message);
+    EXPECT(strstr(message, "above the bound of 1000000000 steps per advance") != NULL,
+           "no bound in: %s", message);
+    RKMPM_CHECK(rkmpm_sim_set_max_steps_per_advance(f.sim, 10));
+    n = 77;
+    CALL(f.sim, rkmpm_sim_advance(f.sim, 24.5 * stable_dt(&f, 0.5), 0.5, &n));
+    EXPECT(n == 0, "wrote %llu steps", (unsigned long long)n);
+    rkmpm_last_error_message(message, sizeof message);
+    EXPECT(strstr(message, "needs about 2.500e1 steps") != NULL, "no estimate in: %s", message);
     drop(&f);
   }
   ROW("advance.first_step_fails", RKMPM_ERR_CALLBACK) {

@@ -85,6 +85,9 @@ struct RunArgs {
     /// Overrides the scene's run.cfl (fraction of the stable time step, in (0, 1]).
     #[arg(long)]
     cfl: Option<f64>,
+    /// Overrides the scene's run.max_steps (the most steps the run may take; default 10^9).
+    #[arg(long)]
+    max_steps: Option<u64>,
     /// Overrides the scene's run.png: at the end, write <out>/<output>.png, the particles
     /// coloured by this field (velocity, displacement, stress, pressure, volume, mass,
     /// deformation_gradient, plastic_strain, damage, material); `none` writes no picture.
@@ -289,6 +292,9 @@ fn scene_of(args: &RunArgs) -> Result<Scene, String> {
     if let Some(c) = args.cfl {
         scene.run.cfl = c;
     }
+    if let Some(n) = args.max_steps {
+        scene.run.max_steps = n;
+    }
     if let Some(f) = &args.vtk {
         scene.run.vtk = match f.as_str() {
             "ascii" => rkmpm::options::VtkFormat::Ascii,
@@ -477,6 +483,10 @@ fn run_scene<const D: usize>(
     };
     let mut next = 1;
     let mut shown = 0;
+    // run.max_steps bounds the whole run (one advance), refused up front when the estimate
+    // exceeds it.
+    sim.set_max_steps_per_advance(run.max_steps)
+        .map_err(|e| e.message)?;
     let stepped = sim.advance_observed(end - sim.time(), run.cfl, &mut |sim, progress| {
         let rate = n * sim.steps() as f64 / start.elapsed().as_secs_f64().max(1e-9);
         let done = (1000.0 * progress.time / end) as u64;

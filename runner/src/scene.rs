@@ -127,6 +127,9 @@ fn two() -> f64 {
 fn default_cfl() -> f64 {
     0.3
 }
+fn default_max_steps() -> u64 {
+    rkmpm::sim::DEFAULT_MAX_STEPS_PER_ADVANCE
+}
 fn default_ppc() -> usize {
     2
 }
@@ -297,6 +300,11 @@ pub struct RunSpec {
     /// 3D: the picture shows the section `y = section` (m); default the middle of the bodies.
     #[serde(default)]
     pub section: Option<f64>,
+    /// The most steps the whole run may take (at least 1; default 10^9): a run whose estimate
+    /// `end_time / stable step` exceeds it is refused before it starts, and one whose stable
+    /// step shrinks on the way stops when it has taken them (its frames so far stay written).
+    #[serde(default = "default_max_steps")]
+    pub max_steps: u64,
 }
 
 fn default_output() -> String {
@@ -440,7 +448,22 @@ impl Scene {
                 self.run.end_time
             )));
         }
-        sim.stable_dt(self.run.cfl).map_err(context("run"))?;
+        let first = sim.stable_dt(self.run.cfl).map_err(context("run"))?;
+        let max = self.run.max_steps;
+        if max == 0 {
+            return Err(Error::invalid("run.max_steps must be at least 1, got 0"));
+        }
+        // As `Sim::advance` estimates a run: `ceil(duration / stable step)`.
+        let estimate = (self.run.end_time / first).ceil();
+        if estimate > max as f64 {
+            return Err(Error::invalid(format!(
+                "run: end_time = {:e} s needs about {estimate:.3e} steps of {first:.3e} s (cfl {} \
+                 of the stable step at the start), above run.max_steps = {max}: shorten the run, \
+                 or raise max_steps (--max-steps) if so long a run is meant",
+                self.run.end_time, self.run.cfl
+            )));
+        }
+        sim.set_max_steps_per_advance(max).map_err(context("run"))?;
         Ok(sim)
     }
 }
@@ -801,6 +824,67 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.message.contains("quartic"), "{}", e.message);
+    }
+
+    /// `run.max_steps` bounds the run: a scene whose estimate exceeds it is refused before the
+    /// run with the estimate, and the simulation it builds carries the bound.
+    #[test]
+    fn run_max_steps_refuses_a_run_above_it() {
+        let good = BUNDLED[0].1;
+        let with = |extra: &str| good.replace("[run]\n", &format!("[run]\n{extra}\n"));
+        let scene = Scene::from_toml(good, "disks").unwrap();
+        assert_eq!(scene.run.max_steps, 1_000_000_000);
+        // The disks' stable step: the estimate the refusal gives.
+        let first = match scene.build().unwrap() {
+            SceneSim::D2(sim) => {
+                assert_eq!(sim.max_steps_per_advance(), 1_000_000_000);
+                sim.stable_dt(scene.run.cfl).unwrap()
+            }
+            SceneSim::D3(_) => unreachable!("disks is 2D"),
+        };
+        let e = Scene::from_toml(&with("max_steps = 10"), "x")
+            .unwrap()
+            .build()
+            .err()
+            .unwrap();
+        let estimate = format!("needs about {:.3e} steps", (3.0 / first).ceil());
+        assert!(
+            e.message.contains(&estimate) && e.message.contains("above run.max_steps = 10"),
+            "{} lacks {estimate}",
+            e.message
+        );
+        let e = Scene::from_toml(&with("max_steps = 0"), "x")
+            .unwrap()
+            .build()
+            .err()
+            .unwrap();
+        assert!(e.message.contains("at least 1"), "{}", e.message);
+        // An end time of 1e300 s: refused under the default bound instead of run for ever.
+        let text = good.replace("end_time = 3.0", "end_time = 1e300");
+        let e = Scene::from_toml(&text, "x").unwrap().build().err().unwrap();
+        assert!(
+            e.message.contains("above run.max_steps = 1000000000"),
+            "{}",
+            e.message
+        );
+        // Raised, the bound lets the scene build and the simulation carries it.
+        match Scene::from_toml(&with("max_steps = 123456"), "x")
+            .unwrap()
+            .build()
+            .unwrap()
+        {
+            SceneSim::D2(sim) => assert_eq!(sim.max_steps_per_advance(), 123_456),
+            SceneSim::D3(_) => unreachable!("disks is 2D"),
+        }
+        // A material no solid matches is refused with its table and its reason.
+        let text = good.replace("young = 1000.0", "young = 1e300");
+        let e = Scene::from_toml(&text, "x").unwrap().build().err().unwrap();
+        assert!(
+            e.message.starts_with("materials[0] \"rubber\": ")
+                && e.message.contains("exceeds 1e5 m/s"),
+            "{}",
+            e.message
+        );
     }
 
     /// Misspelt keys, missing keys and values of the wrong type name their line and field.

@@ -16,7 +16,10 @@ pub struct ElasticConstants {
 }
 
 impl ElasticConstants {
-    /// Fails unless density and Young's modulus are positive and `-1 < ν < 0.5`.
+    /// Fails unless density and Young's modulus are positive and `-1 < ν < 0.5`, and (each
+    /// with its reason) unless the density is at least [`super::MIN_DENSITY`] and the P-wave
+    /// speed `sqrt((λ + 2μ)/ρ)` at most [`super::MAX_WAVE_SPEED`]: outside them no physical
+    /// material lies, and the stable step of the fastest could not carry a run to its end.
     pub fn new(density: f64, young: f64, poisson: f64) -> Result<Self> {
         check_positive("density", density)?;
         check_positive("young", young)?;
@@ -35,6 +38,7 @@ impl ElasticConstants {
                  mu = {mu:e}, c = {wave_speed:e})"
             )));
         }
+        super::check_physical(density, wave_speed)?;
         Ok(ElasticConstants {
             density,
             young,

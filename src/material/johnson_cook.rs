@@ -176,7 +176,11 @@ impl JohnsonCook {
                 )));
             }
         }
-        Ok(JohnsonCook { elastic, p })
+        let model = JohnsonCook { elastic, p };
+        // The EOS's bulk modulus `ρ0 c0²` may exceed the elastic one: the wave speed the
+        // stable step uses, at the reference volume.
+        super::check_physical(p.density, model.wave_speed(1.0))?;
+        Ok(model)
     }
 
     fn homologous(&self, heating: f64) -> f64 {

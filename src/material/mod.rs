@@ -13,8 +13,48 @@ pub use elastic::{ElasticConstants, LinearElastic, NeoHookean};
 pub use johnson_cook::{ofhc_copper, JohnsonCook, JohnsonCookParameters, MieGruneisen};
 pub use plastic::{DruckerPrager, History, InertialRheology};
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use nalgebra::Matrix3;
+
+/// The fastest dilatational (P-) wave speed a material may have, in m/s (material parameters
+/// are SI). The fastest real solids are near 1.8e4 m/s (diamond; beryllium 1.3e4 m/s), so no
+/// physical material comes near the bound; a faster one is a slip of units or of an exponent
+/// (a Young's modulus of 1e300 Pa at 1000 kg/m³ gives 3e148 m/s), and the stable step
+/// `h / c` that follows is so small that no run over a physical duration can end.
+pub const MAX_WAVE_SPEED: f64 = 1e5;
+
+/// The smallest density a material may have, in kg/m³: about that of interstellar gas, far
+/// below any continuum the method models (air is 1.2 kg/m³, the lightest aerogels about 0.2), so
+/// a density below it is a slip of units or of an exponent, or a value that has underflowed.
+/// It is kept that low because tests and hosts use very light materials on purpose (dust of
+/// 1e-13 of a body's mass, to probe the grid's mass floor).
+pub const MIN_DENSITY: f64 = 1e-20;
+
+/// Fails unless `density` is at least [`MIN_DENSITY`] and the P-wave speed `wave_speed` of the
+/// material is finite, positive and at most [`MAX_WAVE_SPEED`], each with its reason.
+pub(crate) fn check_physical(density: f64, wave_speed: f64) -> Result<()> {
+    if density.is_nan() || density < MIN_DENSITY {
+        return Err(Error::invalid(format!(
+            "density {density:e} kg/m³ is below {MIN_DENSITY:e} kg/m³, about that of \
+             interstellar gas: no material is that light (material parameters are SI units)"
+        )));
+    }
+    if !(wave_speed.is_finite() && wave_speed > 0.0) {
+        return Err(Error::invalid(format!(
+            "the material's wave speed is {wave_speed:e} m/s: no stable time step follows \
+             from it"
+        )));
+    }
+    if wave_speed > MAX_WAVE_SPEED {
+        return Err(Error::invalid(format!(
+            "the material's dilatational (P-) wave speed {wave_speed:.3e} m/s \
+             exceeds {MAX_WAVE_SPEED:e} m/s, beyond any solid (diamond: about 1.8e4 m/s); its \
+             stable step would be h / {wave_speed:.3e} s (material parameters are SI units: \
+             Pa and kg/m³)"
+        )));
+    }
+    Ok(())
+}
 
 /// What a constitutive model provides to the step.
 pub trait Constitutive {
@@ -109,9 +149,16 @@ impl Material {
     }
 
     /// A rigid body of density `density` moving with `velocity` (only the first `dim` components
-    /// are used). Fails for a non-positive density or a non-finite velocity.
+    /// are used). Fails for a density not finite or below [`MIN_DENSITY`], or a non-finite
+    /// velocity.
     pub fn rigid(density: f64, velocity: [f64; 3]) -> Result<Self> {
         crate::error::check_positive("density", density)?;
+        if density < MIN_DENSITY {
+            return Err(Error::invalid(format!(
+                "density {density:e} kg/m³ is below {MIN_DENSITY:e} kg/m³, about that of \
+                 interstellar gas: no material is that light (material parameters are SI units)"
+            )));
+        }
         for v in velocity {
             crate::error::check_finite("velocity", v)?;
         }

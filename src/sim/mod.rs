@@ -3,7 +3,7 @@
 mod stepping;
 mod timestep;
 
-pub use timestep::Progress;
+pub use timestep::{Progress, DEFAULT_MAX_STEPS_PER_ADVANCE};
 
 use crate::energy::EnergyLedger;
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
@@ -151,6 +151,10 @@ pub struct Sim<const D: usize> {
     pub(crate) fast_paths: FastPaths,
     /// What the steps did to the energy, when the accounting is on.
     pub(crate) energy: EnergyLedger,
+    /// The bound on the steps of one adaptive run ([`Sim::set_max_steps_per_advance`]): a
+    /// setting of the caller's run, like the fast paths and the body force, so not part of a
+    /// checkpoint (a loaded simulation has the default).
+    pub(crate) max_steps_per_advance: u64,
 }
 
 impl<const D: usize> Sim<D> {
@@ -180,6 +184,7 @@ impl<const D: usize> Sim<D> {
             work: Workspace::default(),
             fast_paths: FastPaths::default(),
             energy: EnergyLedger::default(),
+            max_steps_per_advance: DEFAULT_MAX_STEPS_PER_ADVANCE,
         })
     }
 
@@ -233,6 +238,27 @@ impl<const D: usize> Sim<D> {
     /// The step's fast paths.
     pub fn fast_paths(&self) -> FastPaths {
         self.fast_paths
+    }
+
+    /// Bounds the steps one [`Sim::advance`] may take (at least 1; default
+    /// [`DEFAULT_MAX_STEPS_PER_ADVANCE`], 10^9): a run whose estimate exceeds it is refused
+    /// before its first step, and a run whose stable step shrinks on the way stops there. Raise
+    /// it for a run that is meant to be that long; a host that wants to stop a run by its own
+    /// measure does so from the progress callback ([`Sim::advance_observed`]). Any time, also
+    /// between steps; a setting of the run, not saved in a checkpoint.
+    pub fn set_max_steps_per_advance(&mut self, max_steps: u64) -> Result<()> {
+        if max_steps == 0 {
+            return Err(Error::invalid(
+                "max_steps_per_advance must be at least 1, got 0",
+            ));
+        }
+        self.max_steps_per_advance = max_steps;
+        Ok(())
+    }
+
+    /// The bound on the steps of one [`Sim::advance`] ([`Sim::set_max_steps_per_advance`]).
+    pub fn max_steps_per_advance(&self) -> u64 {
+        self.max_steps_per_advance
     }
 
     /// Chooses the shape function. Before stepping only.

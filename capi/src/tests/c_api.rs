@@ -1021,3 +1021,93 @@ fn particles_come_back_in_the_order_they_were_added() {
         rkmpm_sim_free(sim);
     }
 }
+
+/// Issue 64: a material with E = 1e300 Pa was accepted and `rkmpm_sim_advance` then set out on
+/// 1e147 steps. Such a material is refused with its reason, and a run above the bound on the
+/// steps of one advance is refused before its first step with the estimate in the message;
+/// both leave the simulation as it was.
+#[test]
+fn absurd_materials_and_runs_are_refused_through_the_c_api() {
+    unsafe {
+        let sim = sim2d(false);
+        let mut id = 77u32;
+        assert_eq!(
+            rkmpm_sim_add_material_neo_hookean(sim, 1000.0, 1e300, 0.3, &mut id),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let message = last_error();
+        assert!(
+            message.starts_with("rkmpm_sim_add_material_neo_hookean: ")
+                && message.contains("wave speed")
+                && message.contains("exceeds 1e5 m/s"),
+            "{message}"
+        );
+        assert_eq!(id, 77, "a refused material wrote an id");
+        // The next material still gets id 1: the refused one used up none.
+        assert_eq!(
+            rkmpm_sim_add_material_linear_elastic(sim, 1000.0, 1e5, 0.3, &mut id),
+            RKMPM_OK
+        );
+        assert_eq!(id, 1);
+        assert_eq!(
+            rkmpm_sim_add_material_rigid(sim, 1e-300, [0.0; 2].as_ptr(), &mut id),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(
+            last_error().contains("below 1e-20 kg/m³"),
+            "{}",
+            last_error()
+        );
+
+        let mut bound = 0u64;
+        assert_eq!(rkmpm_sim_max_steps_per_advance(sim, &mut bound), RKMPM_OK);
+        assert_eq!(bound, RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE);
+        assert_eq!(bound, 1_000_000_000);
+
+        let before = positions(sim);
+        let mut steps = 77u64;
+        assert_eq!(
+            rkmpm_sim_advance(sim, 1e300, 0.3, &mut steps),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let message = last_error();
+        assert!(
+            message.starts_with("rkmpm_sim_advance: ")
+                && message.contains("above the bound of 1000000000 steps per advance"),
+            "{message}"
+        );
+        assert_eq!(steps, 0);
+        let mut dt = 0.0;
+        assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+        // The estimate in the message is duration / stable step, to its 4 printed digits.
+        let estimate = format!("{:.3e}", (1e300 / dt).ceil());
+        assert!(message.contains(&estimate), "{message} lacks {estimate}");
+
+        // A bound of 10 steps refuses a run of about 25 and lets it through once raised.
+        assert_eq!(
+            rkmpm_sim_set_max_steps_per_advance(sim, 0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(last_error().contains("at least 1"), "{}", last_error());
+        assert_eq!(rkmpm_sim_set_max_steps_per_advance(sim, 10), RKMPM_OK);
+        assert_eq!(
+            rkmpm_sim_advance(sim, 24.5 * dt, 0.3, &mut steps),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        assert!(
+            last_error().contains("needs about 2.500e1 steps"),
+            "{}",
+            last_error()
+        );
+        let mut time = -1.0;
+        let mut count = 77u64;
+        assert_eq!(rkmpm_sim_time(sim, &mut time), RKMPM_OK);
+        assert_eq!(rkmpm_sim_step_count(sim, &mut count), RKMPM_OK);
+        assert_eq!((time, count, steps), (0.0, 0, 0));
+        assert_eq!(positions(sim), before);
+        assert_eq!(rkmpm_sim_set_max_steps_per_advance(sim, 100), RKMPM_OK);
+        assert_eq!(rkmpm_sim_advance(sim, 24.5 * dt, 0.3, &mut steps), RKMPM_OK);
+        assert_eq!(steps, 25);
+        rkmpm_sim_free(sim);
+    }
+}

@@ -1,7 +1,9 @@
 //! Fuzzing the C API: random sequences of calls with random (often invalid) arguments, driven by
 //! proptest. Every call must return a defined status (never the panic status), a failed call
 //! must leave a message and change nothing a caller can observe, and the simulation must stay
-//! usable. No call may crash or hang.
+//! usable. No call may crash or hang: each runs under a time budget ([`CALL_BUDGET`]); one that
+//! returns late fails its case, and one that does not return at all is reported by a watchdog
+//! thread, which then ends the test process with a failure instead of letting it hang.
 //!
 //! A second target feeds `rkmpm_sim_load` damaged checkpoints whose checksum has been made right
 //! again, so that the decoder itself (not only the CRC) meets every kind of garbage.
@@ -10,14 +12,31 @@
 //! Drucker–Prager seed body (its own strategy, so that the first target's stored seeds keep
 //! giving the cases they recorded).
 //!
-//! The test command runs 20 000 + 3 000 sequences and 5 000 checkpoints (about 30 s in
-//! release); a longer run: `PROPTEST_CASES=1000000 cargo test --release -p rkmpm-capi --
-//! --nocapture` (the counts of calls, failures and steps are printed).
+//! A fourth target draws durations, time steps, CFL numbers, moduli, densities and velocities
+//! from the whole double range (every exponent, either sign, subnormals, NaN, ±inf), as the
+//! first draws bad positions, and changes the bound on the steps of an adaptive run: an absurd
+//! run must be refused, not started. Every target sets that bound to [`FUZZ_MAX_STEPS`].
+//!
+//! The test command runs 20 000 + 3 000 + 14 000 sequences and 5 000 checkpoints; the counts of
+//! calls, failures and steps are printed with `--nocapture` (figures in `docs/ROBUSTNESS.md`).
+//! A longer run: `PROPTEST_CASES=1000000 cargo test --release -p rkmpm-capi -- --nocapture`.
 
 use crate::*;
 use proptest::prelude::*;
 use std::ffi::CString;
 use std::ptr::{null, null_mut};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+/// The time a call may take. The slowest single steps of the targets (3D, VC of order 4 with
+/// boundary points) take about a second on a loaded machine, and an adaptive run takes at most
+/// [`FUZZ_MAX_STEPS`] of them; thirty seconds leaves room for that and still ends a hang.
+const CALL_BUDGET: Duration = Duration::from_secs(30);
+
+/// The bound on the steps of one adaptive run that every target sets: small enough that an
+/// accepted run of the slowest steps fits the budget, large enough that runs of ordinary
+/// durations go through and meet the bound while stepping.
+const FUZZ_MAX_STEPS: u64 = 20;
 
 /// Interesting floating-point values: normal ones and every kind of bad one.
 fn real() -> impl Strategy<Value = f64> {
@@ -31,6 +50,19 @@ fn real() -> impl Strategy<Value = f64> {
         1 => Just(f64::NEG_INFINITY),
         1 => Just(1e308),
         1 => Just(1e-300),
+    ]
+}
+
+/// Any double: every decade from the subnormals to the overflow with either sign, arbitrary bit
+/// patterns (NaN payloads, infinities, subnormals), and the values of [`real`].
+fn any_double() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        2 => real(),
+        2 => (any::<bool>(), -330i32..310, 1.0f64..10.0).prop_map(|(negative, e, m)| {
+            let v = m * 10f64.powi(e);
+            if negative { -v } else { v }
+        }),
+        1 => any::<f64>(),
     ]
 }
 
@@ -60,6 +92,11 @@ enum Call {
     },
     Step(f64),
     Advance(f64, f64),
+    /// `rkmpm_sim_step` with this `dt` as it is (the whole-range target).
+    StepBy(f64),
+    /// `rkmpm_sim_advance` with this duration and cfl as they are (the whole-range target).
+    AdvanceBy(f64, f64),
+    SetMaxSteps(u64),
     StableDt(f64),
     Read {
         field: u32,
@@ -115,6 +152,24 @@ fn call_with_rheology() -> impl Strategy<Value = Call> {
     )
         .prop_map(|(m, on, dmu, i0, d)| Call::SetRheology(m, on, dmu, i0, d));
     prop_oneof![9 => call(), 1 => rheology]
+}
+
+/// The calls of [`call`] and, four times in ten, calls whose durations, steps, CFL numbers,
+/// moduli, densities and velocities come from the whole double range ([`any_double`]), with the
+/// bound on the steps of a run set anywhere up to [`FUZZ_MAX_STEPS`] (and to 0, refused).
+fn call_with_any_double() -> impl Strategy<Value = Call> {
+    let wide = prop_oneof![
+        2 => (any_double(), any_double(), prop_oneof![Just(0.3), any_double()])
+            .prop_map(|(a, b, c)| Call::AddNeoHookean(a, b, c)),
+        1 => (any_double(), any_double(), Just(0.3), Just(30.0), prop_oneof![Just(0.0), any_double()], Just(0.0))
+            .prop_map(|(a, b, c, d, e, f)| Call::AddDruckerPrager(a, b, c, d, e, f)),
+        1 => (any_double(), prop::array::uniform3(any_double())).prop_map(|(a, v)| Call::AddRigid(a, v)),
+        2 => any_double().prop_map(Call::StepBy),
+        4 => (any_double(), prop_oneof![3 => 0.05f64..1.0, 1 => any_double()])
+            .prop_map(|(d, c)| Call::AdvanceBy(d, c)),
+        1 => prop_oneof![Just(0u64), Just(1), 1..=FUZZ_MAX_STEPS].prop_map(Call::SetMaxSteps),
+    ];
+    prop_oneof![6 => call(), 4 => wide]
 }
 
 /// Everything a caller can observe of a simulation.
@@ -223,6 +278,12 @@ unsafe fn apply(sim: *mut RkmpmSim, dim: usize, c: &Call) -> RkmpmStatus {
             let mut steps = 0;
             rkmpm_sim_advance(sim, span, *cfl, &mut steps)
         }
+        Call::StepBy(dt) => rkmpm_sim_step(sim, *dt),
+        Call::AdvanceBy(duration, cfl) => {
+            let mut steps = 0;
+            rkmpm_sim_advance(sim, *duration, *cfl, &mut steps)
+        }
+        Call::SetMaxSteps(n) => rkmpm_sim_set_max_steps_per_advance(sim, *n),
         Call::StableDt(cfl) => {
             let mut dt = 0.0;
             rkmpm_sim_stable_dt(sim, *cfl, &mut dt)
@@ -254,6 +315,59 @@ static CASES: AtomicUsize = AtomicUsize::new(0);
 /// Steps that moved particles after μ(I) was switched on in the same case.
 static STEPS_WITH_RHEOLOGY: AtomicUsize = AtomicUsize::new(0);
 
+/// The call a fuzzing thread is in: when it started, and the case it belongs to.
+struct Running {
+    started: Instant,
+    dim: u32,
+    calls: Arc<[Call]>,
+    index: usize,
+}
+
+type Slot = Arc<Mutex<Option<Running>>>;
+
+/// The slots of every fuzzing thread, watched by one thread that ends the process (with a
+/// report on stderr and a failing exit status) when a call has run past [`CALL_BUDGET`]: such a
+/// call may never return, and the test must fail rather than hang.
+fn watchdog() -> &'static Mutex<Vec<Slot>> {
+    static SLOTS: OnceLock<Mutex<Vec<Slot>>> = OnceLock::new();
+    SLOTS.get_or_init(|| {
+        std::thread::spawn(|| loop {
+            std::thread::sleep(Duration::from_millis(200));
+            for slot in watchdog().lock().unwrap().iter() {
+                let running = slot.lock().unwrap();
+                if let Some(r) = running
+                    .as_ref()
+                    .filter(|r| r.started.elapsed() > CALL_BUDGET)
+                {
+                    use std::io::Write;
+                    // Written past the test harness's capture, which a process exit would lose.
+                    let _ = writeln!(
+                        std::io::stderr(),
+                        "fuzz: a call has not returned after {:.0} s (budget {} s): dim {}, \
+                         call {} of {:?}",
+                        r.started.elapsed().as_secs_f64(),
+                        CALL_BUDGET.as_secs(),
+                        r.dim,
+                        r.index,
+                        r.calls
+                    );
+                    std::process::exit(101);
+                }
+            }
+        });
+        Mutex::new(Vec::new())
+    })
+}
+
+thread_local! {
+    /// This thread's slot, registered with the watchdog on first use.
+    static SLOT: Slot = {
+        let slot = Slot::default();
+        watchdog().lock().unwrap().push(slot.clone());
+        slot
+    };
+}
+
 /// The body a seeded case starts from (material 0 with eight particles).
 #[derive(Debug, Clone, Copy)]
 enum SeedBody {
@@ -268,7 +382,9 @@ fn run_sequence(
     seeded: bool,
     seed: SeedBody,
     calls: &[Call],
+    max_steps: u64,
 ) -> Result<(), TestCaseError> {
+    let case: Arc<[Call]> = calls.into();
     unsafe {
         let mut sim = null_mut();
         let origin = [0.0; 3];
@@ -300,8 +416,12 @@ fn run_sequence(
                 RKMPM_OK
             );
         }
+        prop_assert_eq!(
+            rkmpm_sim_set_max_steps_per_advance(sim, max_steps),
+            RKMPM_OK
+        );
         let mut rheology_on = false;
-        for c in calls {
+        for (index, c) in calls.iter().enumerate() {
             let before = snapshot(sim);
             if let Some(trace) = std::env::var_os("RKMPM_FUZZ_TRACE") {
                 // The call about to run, for a run that hangs or aborts.
@@ -310,19 +430,36 @@ fn run_sequence(
                     format!("dim {dim}, {} calls: {calls:?}\nnow: {c:?}\n", calls.len()),
                 );
             }
-            let started = std::time::Instant::now();
+            let started = Instant::now();
+            SLOT.with(|slot| {
+                *slot.lock().unwrap() = Some(Running {
+                    started,
+                    dim,
+                    calls: case.clone(),
+                    index,
+                })
+            });
             let status = apply(sim, dim as usize, c);
-            if started.elapsed().as_secs_f64() > 0.5 {
+            let took = started.elapsed();
+            SLOT.with(|slot| *slot.lock().unwrap() = None);
+            prop_assert!(
+                took <= CALL_BUDGET,
+                "{:?} took {:.1} s, beyond the budget of {} s",
+                c,
+                took.as_secs_f64(),
+                CALL_BUDGET.as_secs()
+            );
+            if took.as_secs_f64() > 0.5 {
                 eprintln!(
                     "slow call ({:.1} s, dim {dim}, {:?}): {c:?}",
-                    started.elapsed().as_secs_f64(),
+                    took.as_secs_f64(),
                     status
                 );
             }
             CALLS.fetch_add(1, Relaxed);
             if status != RKMPM_OK {
                 FAILED.fetch_add(1, Relaxed);
-            } else if matches!(c, Call::Step(_)) && before.count > 0 {
+            } else if matches!(c, Call::Step(_) | Call::StepBy(_)) && before.count > 0 {
                 STEPS_WITH_PARTICLES.fetch_add(1, Relaxed);
                 if rheology_on {
                     STEPS_WITH_RHEOLOGY.fetch_add(1, Relaxed);
@@ -338,7 +475,8 @@ fn run_sequence(
             );
             // An adaptive run that fails part-way keeps its good steps (documented), so only
             // its first step must leave nothing behind.
-            let partial = matches!(c, Call::Advance(..)) && snapshot(sim).steps != before.steps;
+            let partial = matches!(c, Call::Advance(..) | Call::AdvanceBy(..))
+                && snapshot(sim).steps != before.steps;
             if status != RKMPM_OK {
                 prop_assert!(!last_error().is_empty(), "{:?}: no message", c);
             }
@@ -377,7 +515,7 @@ proptest! {
         seeded in prop::bool::weighted(0.7),
         calls in prop::collection::vec(call(), 1..40),
     ) {
-        run_sequence(dim, seeded, SeedBody::NeoHookean, &calls)?;
+        run_sequence(dim, seeded, SeedBody::NeoHookean, &calls, FUZZ_MAX_STEPS)?;
     }
 }
 
@@ -391,7 +529,23 @@ proptest! {
         seeded in prop::bool::weighted(0.8),
         calls in prop::collection::vec(call_with_rheology(), 1..40),
     ) {
-        run_sequence(dim, seeded, SeedBody::DruckerPrager, &calls)?;
+        run_sequence(dim, seeded, SeedBody::DruckerPrager, &calls, FUZZ_MAX_STEPS)?;
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 14_000, max_shrink_iters: 2000, ..ProptestConfig::default() })]
+
+    /// Durations, steps, CFL numbers, moduli, densities and velocities from the whole double
+    /// range, with the bound on a run's steps set to [`FUZZ_MAX_STEPS`] (and changed by the
+    /// calls): every call returns within the budget.
+    #[test]
+    fn random_call_sequences_with_any_double_never_hang(
+        dim in 2u32..4,
+        seeded in prop::bool::weighted(0.8),
+        calls in prop::collection::vec(call_with_any_double(), 1..80),
+    ) {
+        run_sequence(dim, seeded, SeedBody::NeoHookean, &calls, FUZZ_MAX_STEPS)?;
     }
 }
 
