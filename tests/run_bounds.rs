@@ -113,7 +113,7 @@ fn the_bound_holds_while_the_stable_step_shrinks() {
     assert!(sim.time() > 0.0 && sim.time() < 1.0, "t = {}", sim.time());
     // The 100 steps kept are those of a run that was never refused.
     let mut free = setup();
-    let mut observe = |p: rkmpm::sim::Progress| p.steps < 100;
+    let mut observe = |_: &Sim<2>, p: rkmpm::sim::Progress| p.steps < 100;
     let _ = free.advance_observed(1.0, 0.5, &mut observe);
     assert_eq!(state(&free), state(&sim));
     // Raised, the bound lets the rest through: about 26 × 20 steps in all.

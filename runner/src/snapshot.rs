@@ -279,10 +279,12 @@ pub fn write_panels<const D: usize>(
         .iter()
         .map(|(d, _)| roughness(d, 3.0 * cut.half_width))
         .collect();
-    let (fields, shown): (Vec<(Vec<f64>, String)>, Vec<Vec<rkmpm::Vector<D>>>) = panels
-        .into_iter()
-        .map(|(d, label)| ((d.value, label), d.position))
-        .unzip();
+    let mut fields = Vec::with_capacity(panels.len());
+    let mut shown = Vec::with_capacity(panels.len());
+    for (d, label) in panels {
+        fields.push((d.value, label));
+        shown.push(d.position);
+    }
     let label = fields.first().map(|f| f.1.clone()).unwrap_or_default();
     let fail = |e: Box<dyn std::error::Error>| format!("writing {}: {e}", path.display());
     plotters::style::register_font(
