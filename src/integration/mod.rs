@@ -21,7 +21,7 @@
 //! the corrected gradients sum to zero (linear momentum is conserved to round-off), and a node
 //! at a body's edge, with a small mass, gets a correction as small as its weights (no force
 //! floor is needed). At order 1, when switched on (`Sim::set_vc_linear_fit`, experimental and
-//! off by default: not energy stable on the colliding disks, docs/METHOD.md) and for the shapes
+//! off by default, docs/METHOD.md) and for the shapes
 //! with at least three nodes per axis in every support (`Shape::vc_linear_fit`: the cubic
 //! B-spline, RK of support ≥ 2), the particle subtracts its weighted linear fit instead of the
 //! mean, `w_Ip (ζ_I − μ_p − C_p u_Ip)` with
@@ -51,7 +51,12 @@
 //! (every preconditioned residual, every product `K d` and the solution lose their part along
 //! the null space, [`NullSpace`]): without it round-off carried the iterates along the linear
 //! fields to `10^10` at nodes the particles barely reach, and a block dropped onto a slip floor
-//! lost its mirror symmetry (3.6e-3, `tests/vc_conservation.rs`). A node whose `A_I` is
+//! lost its mirror symmetry (3.6e-3, `tests/vc_conservation.rs`). With the linear fit a node
+//! whose reach `A_I` is below `WEAK_REACH` of the largest joins no body: where two bodies'
+//! supports first meet, such nodes made one body of two, each body's own linear fields became
+//! near-null directions of `K` with the right-hand side's part along them left in, and the
+//! solve amplified it (two approaching disks inverted a particle as their supports met). Alone
+//! in its body, such a node's equality is not imposed. A node whose `A_I` is
 //! singular (too few particles in its support for the order) is preconditioned with its
 //! constant part only, and so corrected to order 1 ([`VcCorrection::reduced_to_first_order`]).
 //! A node that the particles barely reach while a surface point is near it has an equality the
@@ -116,6 +121,10 @@ pub(crate) const VC_SOLVE_STAGNATION: usize = 10;
 /// It applies at order 1 only: at order 2 the same box's edge nodes need up to `6.7·10^3 / h`
 /// (`second_order_divergence_equality`), and no flow is known yet that fails at order 2.
 pub(crate) const VC_MAX_CORRECTION: f64 = 1e3;
+
+/// With the linear fit, nodes whose reach `A_I` is below this fraction of the largest join no
+/// body of `K`'s null space.
+const WEAK_REACH: f64 = 1e-2;
 
 /// Test polynomials at most (order 4 in 3D: the monomials of degree ≤ 3).
 const MAX_BASIS: usize = 20;
@@ -491,11 +500,19 @@ impl<const D: usize> VcCorrection<D> {
         // K's null space per body (the nodes that particles connect), removed from the
         // right-hand side (see below) and from every preconditioned residual, so that round-off
         // does not carry the iterates along it (projected conjugate gradients).
+        // With the linear fit, nodes the particles barely reach (`WEAK_REACH`) join no body.
+        let weak = match linear_fit {
+            true => WEAK_REACH * moment.iter().copied().fold(0.0, f64::max),
+            false => 0.0,
+        };
         let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
             if counted(p) {
                 stencils.for_each_shape(p, |_, s| {
                     if s.in_support() {
-                        visit(nodes.slot(s.node));
+                        let slot = nodes.slot(s.node);
+                        if weak == 0.0 || moment[slot] >= weak {
+                            visit(slot);
+                        }
                     }
                 });
             }

@@ -297,9 +297,10 @@ impl<const D: usize> Sim<D> {
     /// cubic B-spline, RK of support ≥ 2) the correction then has no first moment, a symmetric
     /// stress exerts no torque, and with APIC a free body's angular momentum is conserved to
     /// round-off (1.7e-14 in 2D, 2.4e-14 in 3D over 100 steps, against 1e-5 to 1e-3 with the
-    /// mean). It is off by default because it is not energy stable: the colliding disks of the
-    /// default scene (RK1 + VC1) gain energy from 2.54 to 16.5 J/m and invert a particle at
-    /// t = 2.35 s, where the mean fit loses energy as it should (docs/METHOD.md, section 3).
+    /// mean). The default scene's colliding disks (RK1 + VC1) lose energy with it as with the
+    /// mean, 2.54 to 1.98 J/m (mean: 1.98). It is off by default until the convergence study
+    /// has been rerun with it and its cost measured: its solve takes 40–110 iterations a step
+    /// where the mean's takes about 12 (docs/METHOD.md, section 3).
     pub fn set_vc_linear_fit(&mut self, on: bool) -> Result<()> {
         self.before_stepping("the VC fit")?;
         self.vc_linear_fit = on;

@@ -652,6 +652,20 @@ impl SelfWeightColumn {
         integration: Integration,
         transfer: Transfer,
     ) -> Result<ColumnRun> {
+        self.run_observed(cells, shape, integration, transfer, |_| Ok(()), |_| {})
+    }
+
+    /// [`SelfWeightColumn::run`] with `setup` called on the simulation before its first step
+    /// (options the arguments do not name) and `observe` after every step.
+    pub fn run_observed(
+        &self,
+        cells: usize,
+        shape: Shape,
+        integration: Integration,
+        transfer: Transfer,
+        setup: impl FnOnce(&mut Sim<2>) -> Result<()>,
+        mut observe: impl FnMut(&Sim<2>),
+    ) -> Result<ColumnRun> {
         let h = self.height / cells as f64;
         let width = shape.build::<2>()?.ghost_layers().max(2);
         let mut sim = Sim::<2>::new(Vector::<2>::zeros(), [width, cells + 2], h)?;
@@ -684,6 +698,7 @@ impl SelfWeightColumn {
             let (bx, bn) = rkmpm::BoundaryPoints::<2>::from_lattice(&sites, &vol);
             sim.add_boundary_points(&bx, &bn, None)?;
         }
+        setup(&mut sim)?;
         let dt = sim.stable_dt(0.3)? * 0.9;
         let t_end = self.ramp + self.hold;
         let steps = (t_end / dt).ceil() as usize;
@@ -693,6 +708,7 @@ impl SelfWeightColumn {
             let ramp = (sim.time() / self.ramp).min(1.0);
             sim.set_gravity([0.0, -self.gravity * ramp])?;
             sim.step(dt)?;
+            observe(&sim);
         }
         let seconds = start.elapsed().as_secs_f64();
         let ps = sim.particles();
