@@ -400,7 +400,12 @@ pub unsafe extern "C" fn rkmpm_sim_load(
         unsafe { out.write(std::ptr::null_mut()) };
         // SAFETY: the path is NULL or a NUL-terminated string (this function's `# Safety`).
         let path = unsafe { c_path("path", path) }?;
-        let bytes = std::fs::read(path).map_err(rkmpm::Error::from)?;
+        let bytes = std::fs::read(path).map_err(|e| {
+            rkmpm::Error::new(
+                rkmpm::ErrorKind::Io,
+                format!("reading the checkpoint {path}: {e}"),
+            )
+        })?;
         let sim = match rkmpm::io::checkpoint::checkpoint_dimension(&bytes)? {
             2 => AnySim::D2(Sim::<2>::from_checkpoint_bytes(&bytes)?),
             _ => AnySim::D3(Sim::<3>::from_checkpoint_bytes(&bytes)?),

@@ -522,20 +522,65 @@ fn run_scene<const D: usize>(
         // The last good state, to look at: a frame (even without frames) and the summary.
         let _ = series.write_frame(sim);
         summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
-        // The step's own reason; the run's numbers are given here, to 4 significant digits.
-        let reason = match e.message.split_once(" (advancing from t = ") {
-            Some((reason, _)) => reason,
-            None => &e.message,
-        };
         return Err(format!(
-            "the run stopped at step {} at t = {:.3e} s of {:.3e} s: {reason}",
+            "the run stopped at step {} at t = {:.3e} s of {:.3e} s: {}; the frame, picture \
+             and summary show the state before that step",
             sim.steps(),
             sim.time(),
             end,
+            plain_reason(&e.message),
         ));
     }
     summary(sim, p0, e0, start.elapsed().as_secs_f64(), &series);
     Ok(())
+}
+
+/// A refused step's reason in plain numbers: the step's own words without where the advance
+/// was (the run says that), every decimal number to 4 significant digits.
+fn plain_reason(message: &str) -> String {
+    let mut reason = message;
+    if let Some((r, _)) = reason.split_once(" (advancing from t = ") {
+        reason = r;
+    }
+    if reason.starts_with("step ") {
+        if let Some((_, r)) = reason.split_once(") rejected: ") {
+            reason = r;
+        }
+    }
+    let reason = reason.trim_end_matches("; the simulation keeps its last good state");
+    let mut out = String::new();
+    let chars: Vec<char> = reason.chars().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let starts = chars[i].is_ascii_digit()
+            || (chars[i] == '-' && chars.get(i + 1).is_some_and(|c| c.is_ascii_digit()));
+        // Not inside a word (`F2`, `x1`).
+        let in_word = i > 0 && (chars[i - 1].is_alphanumeric() || chars[i - 1] == '_');
+        if !starts || in_word {
+            out.push(chars[i]);
+            i += 1;
+            continue;
+        }
+        let mut j = i + 1;
+        while j < chars.len()
+            && (chars[j].is_ascii_digit()
+                || chars[j] == '.'
+                || chars[j] == 'e'
+                || (matches!(chars[j], '-' | '+') && chars[j - 1] == 'e'))
+        {
+            j += 1;
+        }
+        let token: String = chars[i..j].iter().collect();
+        // A trailing full stop is punctuation.
+        let token = token.trim_end_matches('.');
+        let end = i + token.chars().count();
+        match token.parse::<f64>() {
+            Ok(x) if token.contains(['.', 'e']) => out.push_str(&format!("{x:.3e}")),
+            _ => out.push_str(token),
+        }
+        i = end;
+    }
+    out
 }
 
 fn summary<const D: usize>(
@@ -547,6 +592,11 @@ fn summary<const D: usize>(
 ) {
     let ps = sim.particles();
     let (p1, e1) = (sim.momenta(), sim.energies());
+    // 2D scenes are plane strain: per metre of thickness.
+    let (joules, momentum, angular_momentum) = match D {
+        2 => ("J/m", "kg m/s per m", "kg m^2/s per m"),
+        _ => ("J", "kg m/s", "kg m^2/s"),
+    };
     let fmt = |v: &[f64]| {
         v.iter()
             .map(|c| format!("{c:.4e}"))
@@ -569,7 +619,8 @@ fn summary<const D: usize>(
         ps.len() as f64 * sim.steps() as f64 / wall.max(1e-9)
     );
     println!(
-        "momentum: start ({}), end ({}); angular about the origin {} -> {}",
+        "momentum ({momentum}): start ({}), end ({}); angular about the origin \
+         ({angular_momentum}) {} -> {}",
         fmt(p0.linear.as_slice()),
         fmt(p1.linear.as_slice()),
         angular(&p0),
@@ -584,8 +635,8 @@ fn summary<const D: usize>(
             e.total()
         )
     };
-    println!("energy at the start: {}", line(&e0));
-    println!("energy at the end:   {}", line(&e1));
+    println!("energy ({joules}) at the start: {}", line(&e0));
+    println!("energy ({joules}) at the end:   {}", line(&e1));
     match sim.energy_balance() {
         Ok(b) => {
             // Without plasticity or damage the stress work less the stored energy's change is

@@ -63,6 +63,9 @@ pub struct Scene {
     /// Directory of the scene file: relative particle files are found from it.
     #[serde(skip)]
     pub base: PathBuf,
+    /// The table the options came from, for messages: `options` (None) or `compare`.
+    #[serde(skip)]
+    pub options_table: Option<&'static str>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -79,19 +82,22 @@ pub struct GridSpec {
 pub struct OptionsSpec {
     #[serde(default)]
     pub shape: ShapeKind,
-    #[serde(default = "one")]
-    pub rk_order: u32,
-    #[serde(default = "two")]
-    pub rk_support: f64,
+    /// RK only: the basis order (default 1).
+    #[serde(default)]
+    pub rk_order: Option<u32>,
+    /// RK only: the kernel's support in cells (default 2).
+    #[serde(default)]
+    pub rk_support: Option<f64>,
     #[serde(default)]
     pub integration: IntegrationKind,
-    #[serde(default = "one")]
-    pub vc_order: u32,
+    /// VC only: the order of the divergence equalities (default 1).
+    #[serde(default)]
+    pub vc_order: Option<u32>,
     #[serde(default)]
     pub transfer: TransferKind,
-    /// FLIP fraction of the PIC/FLIP blend.
+    /// PIC/FLIP only: the FLIP fraction of the blend (default 0).
     #[serde(default)]
-    pub flip: f64,
+    pub flip: Option<f64>,
     #[serde(default)]
     pub scheme: Scheme,
     #[serde(default)]
@@ -105,12 +111,12 @@ impl Default for OptionsSpec {
     fn default() -> Self {
         OptionsSpec {
             shape: ShapeKind::default(),
-            rk_order: 1,
-            rk_support: 2.0,
+            rk_order: None,
+            rk_support: None,
             integration: IntegrationKind::default(),
-            vc_order: 1,
+            vc_order: None,
             transfer: TransferKind::default(),
-            flip: 0.0,
+            flip: None,
             scheme: Scheme::default(),
             gravity: None,
             contact_friction: None,
@@ -118,12 +124,74 @@ impl Default for OptionsSpec {
     }
 }
 
-fn one() -> u32 {
-    1
+impl OptionsSpec {
+    pub fn shape(&self) -> Shape {
+        Shape::from_kind(
+            self.shape,
+            self.rk_order.unwrap_or(1),
+            self.rk_support.unwrap_or(2.0),
+        )
+    }
+
+    pub fn integration(&self) -> Integration {
+        Integration::from_kind(self.integration, self.vc_order.unwrap_or(1))
+    }
+
+    pub fn transfer(&self) -> Transfer {
+        Transfer::from_kind(self.transfer, self.flip.unwrap_or(0.0))
+    }
+
+    /// Refuses values out of range and settings that would do nothing in this scene, naming
+    /// the key as the scene writes it (`table` is `options` or `compare`).
+    pub fn check(&self, table: &str) -> Result<()> {
+        let unused = |key: &str, what: &str| {
+            Err(Error::invalid(format!(
+                "{table}.{key} does nothing here: {what}; remove it"
+            )))
+        };
+        if self.shape != ShapeKind::Rk {
+            for (key, given) in [
+                ("rk_order", self.rk_order.is_some()),
+                ("rk_support", self.rk_support.is_some()),
+            ] {
+                if given {
+                    return unused(
+                        key,
+                        "it sets the RK shape functions, and shape is not \"rk\"",
+                    );
+                }
+            }
+        }
+        if self.integration != IntegrationKind::Vc && self.vc_order.is_some() {
+            return unused(
+                "vc_order",
+                "it sets VC integration, and integration is not \"vc\"",
+            );
+        }
+        if let Some(flip) = self.flip {
+            if self.transfer != TransferKind::PicFlip {
+                return unused(
+                    "flip",
+                    "FLIP blends with PIC only, and transfer is not \"pic_flip\"",
+                );
+            }
+            if !(0.0..=1.0).contains(&flip) {
+                return Err(Error::invalid(format!(
+                    "{table}.flip must lie in [0, 1], got {flip}"
+                )));
+            }
+        }
+        if let Some(mu) = self.contact_friction {
+            if !(mu.is_finite() && mu >= 0.0) {
+                return Err(Error::invalid(format!(
+                    "{table}.contact_friction must be a finite coefficient >= 0, got {mu}"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
-fn two() -> f64 {
-    2.0
-}
+
 fn default_cfl() -> f64 {
     0.3
 }
@@ -141,9 +209,9 @@ pub struct WallSpec {
     pub axis: usize,
     pub side: Side,
     pub kind: WallKind,
-    /// Coulomb coefficient of a `friction` wall.
+    /// Coulomb coefficient of a `friction` wall (required there, refused elsewhere).
     #[serde(default)]
-    pub friction: f64,
+    pub friction: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -364,6 +432,7 @@ impl Scene {
         self.compare.as_ref().map(|options| Scene {
             options: options.clone(),
             compare: None,
+            options_table: Some("compare"),
             ..self.clone()
         })
     }
@@ -388,24 +457,39 @@ impl Scene {
         let cells: [usize; D] = std::array::from_fn(|a| g.cells[a]);
         let mut sim = Sim::<D>::new(origin, cells, g.cell_size).map_err(context("grid"))?;
         let o = &self.options;
-        let shape = Shape::from_kind(o.shape, o.rk_order, o.rk_support);
-        sim.set_shape(shape).map_err(context("options"))?;
-        sim.set_integration(Integration::from_kind(o.integration, o.vc_order))
-            .map_err(context("options"))?;
-        sim.set_transfer(Transfer::from_kind(o.transfer, o.flip))
-            .map_err(context("options"))?;
-        sim.set_scheme(o.scheme).map_err(context("options"))?;
+        let table = self.options_table.unwrap_or("options");
+        o.check(table)?;
+        sim.set_shape(o.shape()).map_err(context(table))?;
+        sim.set_integration(o.integration())
+            .map_err(context(table))?;
+        sim.set_transfer(o.transfer()).map_err(context(table))?;
+        sim.set_scheme(o.scheme).map_err(context(table))?;
         if let Some(g) = &o.gravity {
-            sim.set_gravity(vector::<D>("options.gravity", g)?)
-                .map_err(context("options"))?;
+            sim.set_gravity(vector::<D>(&format!("{table}.gravity"), g)?)
+                .map_err(context(table))?;
         }
         if let Some(mu) = o.contact_friction {
-            sim.set_contact(Some(mu)).map_err(context("options"))?;
+            sim.set_contact(Some(mu)).map_err(context(table))?;
         }
         for (k, w) in self.walls.iter().enumerate() {
-            let kind = Wall::from_kind(w.kind, w.friction);
-            sim.set_wall(w.axis, w.side, kind)
-                .map_err(context(&format!("walls[{k}]")))?;
+            let here = format!("walls[{k}]");
+            let friction = match (w.kind, w.friction) {
+                (WallKind::Friction, Some(mu)) => mu,
+                (WallKind::Friction, None) => {
+                    return Err(Error::invalid(format!(
+                        "{here}: a friction wall needs its coefficient, friction = ..."
+                    )))
+                }
+                (_, Some(_)) => {
+                    return Err(Error::invalid(format!(
+                        "{here}.friction does nothing here: only a wall of kind \"friction\" \
+                         reads it; remove it"
+                    )))
+                }
+                (_, None) => 0.0,
+            };
+            sim.set_wall(w.axis, w.side, Wall::from_kind(w.kind, friction))
+                .map_err(context(&here))?;
         }
         let mut ids = Vec::new();
         for (k, m) in self.materials.iter().enumerate() {
@@ -416,6 +500,7 @@ impl Scene {
             let material = m.material().map_err(context(&here))?;
             ids.push(sim.add_material(material));
         }
+        let mut overlaps = Overlaps::<D>::default();
         for (k, b) in self.bodies.iter().enumerate() {
             let here = format!("bodies[{k}]");
             let id = self
@@ -439,6 +524,7 @@ impl Scene {
                     "{here}: the body holds no particle (is it inside the grid?)"
                 )));
             }
+            overlaps.add(k, &x, &vol)?;
             sim.add_particles(ids[id], &x, &vol, v.as_deref())
                 .map_err(context(&here))?;
         }
@@ -735,6 +821,72 @@ fn read_particle_file<const D: usize>(
     }
     let v = (!v.is_empty()).then_some(v);
     Ok((x, vol, v))
+}
+
+/// The particles of the bodies placed so far, hashed by position, to refuse a body that
+/// overlaps another: two bodies' particles closer than half the smaller particle spacing
+/// (`volume^(1/D)`) sit in each other's material, which MPM would push apart at once.
+#[derive(Default)]
+struct Overlaps<const D: usize> {
+    cells: std::collections::HashMap<[i64; D], Vec<(usize, Vector<D>, f64)>>,
+    /// The bucket size: the largest particle spacing so far (a close pair is at most one bucket
+    /// apart in every direction).
+    size: f64,
+}
+
+impl<const D: usize> Overlaps<D> {
+    fn key(&self, x: &Vector<D>) -> [i64; D] {
+        std::array::from_fn(|a| (x[a] / self.size).floor() as i64)
+    }
+
+    /// Adds body `body`'s particles; refuses them if one lies within half a spacing of an
+    /// earlier body's.
+    fn add(&mut self, body: usize, x: &[Vector<D>], volume: &[f64]) -> Result<()> {
+        let spacing = |v: f64| v.abs().powf(1.0 / D as f64);
+        let largest = volume.iter().map(|&v| spacing(v)).fold(0.0, f64::max);
+        if largest > self.size {
+            // Rehash with buckets as large as the largest spacing.
+            self.size = largest;
+            let all: Vec<_> = self.cells.drain().flat_map(|(_, v)| v).collect();
+            for entry in all {
+                let key = self.key(&entry.1);
+                self.cells.entry(key).or_default().push(entry);
+            }
+        }
+        for (xp, &vp) in x.iter().zip(volume) {
+            let key = self.key(xp);
+            for offset in 0..3usize.pow(D as u32) {
+                let near: [i64; D] = std::array::from_fn(|a| {
+                    key[a] + (offset / 3usize.pow(a as u32) % 3) as i64 - 1
+                });
+                let Some(entries) = self.cells.get(&near) else {
+                    continue;
+                };
+                for (other, xq, sq) in entries {
+                    let distance = (xp - xq).norm();
+                    if distance < 0.5 * sq.min(spacing(vp)) {
+                        return Err(Error::invalid(format!(
+                            "bodies[{body}] overlaps bodies[{other}]: its particle at ({}) is \
+                             {distance:.3e} m from one of bodies[{other}], less than half their \
+                             spacing; move the bodies apart",
+                            xp.iter()
+                                .map(|c| format!("{c}"))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )));
+                    }
+                }
+            }
+        }
+        for (xp, &vp) in x.iter().zip(volume) {
+            let key = self.key(xp);
+            self.cells
+                .entry(key)
+                .or_default()
+                .push((body, *xp, spacing(vp)));
+        }
+        Ok(())
+    }
 }
 
 fn vector<const D: usize>(what: &str, v: &[f64]) -> Result<Vector<D>> {

@@ -30,7 +30,8 @@ fn runs_a_bundled_scene_to_its_end() {
     assert!(ok, "{stderr}");
     assert!(stdout.contains("simulated time: 4.0000e-1 s"), "{stdout}");
     assert!(
-        stdout.contains("momentum: start") && stdout.contains("angular about the origin"),
+        stdout.contains("momentum (kg m/s per m): start")
+            && stdout.contains("angular about the origin (kg m^2/s per m)"),
         "{stdout}"
     );
     // The energies at the start and the end, and their change, which is the difference of the
@@ -46,7 +47,10 @@ fn runs_a_bundled_scene_to_its_end() {
         );
         line.rsplit("= ").next().unwrap().trim().parse().unwrap()
     };
-    let (start, end) = (total("energy at the start:"), total("energy at the end:"));
+    let (start, end) = (
+        total("energy (J/m) at the start:"),
+        total("energy (J/m) at the end:"),
+    );
     // The change, then where it went: external work less the stress work's excess over the
     // stored energy less the rest (the bar is elastic: that excess is the time integration's
     // error, and the rest is the scheme's).
@@ -330,7 +334,15 @@ fn a_stopped_run_leaves_its_last_good_state() {
     // Four significant digits: `t = 1.234e-2 s of 1.000e-1 s`, and no detail of the stepping.
     assert!(stderr.contains(" s of 1.000e-1 s: "), "{stderr}");
     assert!(!stderr.contains("advancing from"), "{stderr}");
-    assert!(stdout.contains("energy at the end:"), "{stdout}");
+    assert!(!stderr.contains(") rejected: "), "{stderr}");
+    // Every decimal of the reason to 4 significant digits (no 16-digit numbers).
+    assert!(
+        !stderr
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .any(|n| n.len() > 6),
+        "{stderr}"
+    );
+    assert!(stdout.contains("energy (J/m) at the end:"), "{stdout}");
     assert!(
         out.join("disks_00000.vtu").exists(),
         "the last good state's frame"
@@ -360,7 +372,10 @@ fn check_refuses_what_run_refuses() {
         (
             disks
                 .replacen("transfer = \"apic\"", "transfer = \"mls\"", 1)
-                .replace("shape = \"rk\"", "shape = \"bspline2\""),
+                .replace(
+                    "shape = \"rk\"\nrk_order = 1\nrk_support = 2.0",
+                    "shape = \"bspline2\"",
+                ),
             "the MLS transfer does not go with VC integration",
         ),
         (
@@ -385,6 +400,55 @@ fn check_refuses_what_run_refuses() {
         (
             taylor.replace("section = 0.0002", "section = 0.5"),
             "run.section = 5e-1: the plane y = 5e-1 m lies outside the grid",
+        ),
+        // Settings that would do nothing, named as the scene writes them.
+        (
+            disks.replacen("transfer = \"apic\"", "transfer = \"apic\"\nflip = 0.5", 1),
+            "options.flip does nothing here: FLIP blends with PIC only",
+        ),
+        (
+            disks.replace(
+                "shape = \"rk\"\nrk_order = 1\nrk_support = 2.0\ntransfer = \"apic\"\n\n",
+                "shape = \"bspline3\"\nrk_order = 1\ntransfer = \"apic\"\n\n",
+            ),
+            "compare.rk_order does nothing here",
+        ),
+        (
+            disks.replace(
+                "rk_support = 2.0\ntransfer = \"apic\"\n\n",
+                "rk_support = 2.0\ntransfer = \"apic\"\nvc_order = 2\n\n",
+            ),
+            "compare.vc_order does nothing here",
+        ),
+        (
+            disks.replacen(
+                "transfer = \"apic\"",
+                "transfer = \"pic_flip\"\nflip = 1.5",
+                1,
+            ),
+            "options.flip must lie in [0, 1], got 1.5",
+        ),
+        (
+            disks.replacen(
+                "transfer = \"apic\"",
+                "transfer = \"apic\"\ncontact_friction = -1.0",
+                1,
+            ),
+            "options.contact_friction must be a finite coefficient >= 0, got -1",
+        ),
+        (
+            format!("{disks}\n[[walls]]\naxis = 1\nside = \"low\"\nkind = \"friction\"\n"),
+            "walls[0]: a friction wall needs its coefficient",
+        ),
+        (
+            format!(
+                "{disks}\n[[walls]]\naxis = 1\nside = \"low\"\nkind = \"slip\"\nfriction = 0.3\n"
+            ),
+            "walls[0].friction does nothing here",
+        ),
+        (
+            disks.replace("center = [0.75, 0.75]", "center = [0.35, 0.35]"),
+            "bodies[1] overlaps bodies[0]",
         ),
     ];
     for (k, (text, message)) in cases.iter().enumerate() {

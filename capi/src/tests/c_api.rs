@@ -933,6 +933,12 @@ fn checkpoint_through_the_c_api() {
         );
         let missing = std::ffi::CString::new(dir.join("none.rkmpm").to_str().unwrap()).unwrap();
         assert_eq!(rkmpm_sim_load(missing.as_ptr(), &mut none), RKMPM_ERR_IO);
+        // The message names the file it could not read.
+        let message = last_error();
+        assert!(
+            message.contains("reading the checkpoint") && message.contains("none.rkmpm"),
+            "{message}"
+        );
         rkmpm_sim_free(sim);
     }
 }
