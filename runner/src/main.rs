@@ -23,7 +23,7 @@ use std::time::Instant;
     about = "Run Material Point Method scenes (RK shape functions, VC integration) and write ParaView output",
     long_about = "Run Material Point Method scenes and write ParaView output.\n\n\
         Without a command, `rkmpm [SCENE] [OPTIONS]` is `rkmpm run [SCENE] [OPTIONS]`, and with \
-        no scene it runs the default one (two elastic disks collide). A scene is a TOML file (docs/SCENES.md lists every key) or the \
+        no scene it runs the default one (an elastic column settles on jittered particles, with and without VC). A scene is a TOML file (docs/SCENES.md lists every key) or the \
         name of a bundled scene (`rkmpm list`).",
     after_help = "Examples:\n  rkmpm                                  run the default scene into out/\n  \
         rkmpm run runner/scenes/taylor.toml --out runs/taylor\n  rkmpm run collapse --frames 80 --png plastic_strain\n  \
@@ -67,7 +67,7 @@ enum Command {
 
 #[derive(clap::Args)]
 struct RunArgs {
-    /// A scene file (.toml) or the name of a bundled scene [default: disks].
+    /// A scene file (.toml) or the name of a bundled scene [default: column].
     scene: Option<String>,
     /// Directory for the VTK frames and the .pvd series (created if missing).
     #[arg(long, default_value = "out")]
@@ -281,7 +281,7 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
 
 /// The scene `args` names (the default one without a name), with the overrides it gives.
 fn scene_of(args: &RunArgs) -> Result<Scene, String> {
-    let name = args.scene.clone().unwrap_or_else(|| "disks".into());
+    let name = args.scene.clone().unwrap_or_else(|| "column".into());
     let mut scene = load(&name)?;
     if let Some(t) = args.end_time {
         scene.run.end_time = t;

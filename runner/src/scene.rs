@@ -311,6 +311,11 @@ pub struct BodySpec {
     /// face). Without it a shape that reaches past the grid is refused.
     #[serde(default)]
     pub clip: bool,
+    /// Moves each particle of a shape from its lattice site by a uniform random amount up to
+    /// this fraction of the particle spacing in each direction (irregular particles, as large
+    /// deformation makes them); in [0, 0.5), default 0. The same pattern on every run.
+    #[serde(default)]
+    pub jitter: f64,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -525,6 +530,7 @@ impl Scene {
                 )));
             }
             overlaps.add(k, &x, &vol)?;
+            let x = b.jittered(x, &vol).map_err(context(&here))?;
             sim.add_particles(ids[id], &x, &vol, v.as_deref())
                 .map_err(context(&here))?;
         }
@@ -629,6 +635,35 @@ impl MaterialSpec {
 impl BodySpec {
     /// Positions, volumes and (optional) velocities of the body's particles.
     #[allow(clippy::type_complexity)]
+    /// The lattice sites `x` (of particles of volume `vol`) moved by `jitter`.
+    fn jittered<const D: usize>(
+        &self,
+        mut x: Vec<Vector<D>>,
+        vol: &[f64],
+    ) -> Result<Vec<Vector<D>>> {
+        let j = self.jitter;
+        if !(0.0..0.5).contains(&j) {
+            return Err(Error::invalid(format!(
+                "jitter must lie in [0, 0.5), got {j}"
+            )));
+        }
+        if j > 0.0 && self.file.is_some() {
+            return Err(Error::invalid(
+                "jitter does nothing for a file body (its particles are where the file puts \
+                 them); remove it",
+            ));
+        }
+        if j == 0.0 {
+            return Ok(x);
+        }
+        let mut rng = rkmpm::UniformRng::new(7);
+        for (p, v) in x.iter_mut().zip(vol) {
+            let spacing = v.powf(1.0 / D as f64);
+            *p += Vector::<D>::from_fn(|_, _| (2.0 * rng.uniform() - 1.0) * j * spacing);
+        }
+        Ok(x)
+    }
+
     fn particles<const D: usize>(
         &self,
         sim: &Sim<D>,
@@ -904,12 +939,13 @@ fn context(here: &str) -> impl Fn(Error) -> Error + '_ {
 }
 
 /// The scenes that ship with rkmpm, by name, as TOML text (`runner/scenes/*.toml`).
-pub const BUNDLED: [(&str, &str); 5] = [
+pub const BUNDLED: [(&str, &str); 6] = [
     ("disks", include_str!("../scenes/disks.toml")),
     ("bar", include_str!("../scenes/bar.toml")),
     ("collapse", include_str!("../scenes/collapse.toml")),
     ("taylor", include_str!("../scenes/taylor.toml")),
     ("penetration", include_str!("../scenes/penetration.toml")),
+    ("column", include_str!("../scenes/column.toml")),
 ];
 
 #[cfg(test)]

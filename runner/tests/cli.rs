@@ -109,7 +109,7 @@ fn the_default_scene_draws_both_runs_side_by_side() {
     ]);
     assert!(ok, "{stderr}");
     assert!(
-        stdout.contains("1 material; RK order 1, support 2, VC order 1, APIC, USL"),
+        stdout.contains("1 material; RK order 1, support 2, VC order 1, PIC/FLIP 0, USL"),
         "{stdout}"
     );
     assert!(
@@ -117,7 +117,7 @@ fn the_default_scene_draws_both_runs_side_by_side() {
         "{stdout}"
     );
     assert!(
-        stdout.contains("1 material; RK order 1, support 2, material points, APIC, USL"),
+        stdout.contains("1 material; RK order 1, support 2, material points, PIC/FLIP 0, USL"),
         "{stdout}"
     );
     assert_eq!(stdout.matches("scene: ").count(), 2, "{stdout}");
@@ -126,12 +126,12 @@ fn the_default_scene_draws_both_runs_side_by_side() {
         2,
         "{stdout}"
     );
-    let png = std::fs::read(out.join("disks.png")).unwrap();
+    let png = std::fs::read(out.join("column.png")).unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
     let width = u32::from_be_bytes(png[16..20].try_into().unwrap());
     assert_eq!(width, 1600, "two panels of 800 pixels");
     assert!(
-        !out.join("disks.pvd").exists(),
+        !out.join("column.pvd").exists(),
         "--frames 0 writes no series"
     );
     std::fs::remove_dir_all(out).unwrap();
@@ -227,7 +227,14 @@ fn help_and_listing() {
     }
     let (ok, stdout, _) = rkmpm(&["list"]);
     assert!(ok);
-    for name in ["disks", "bar", "collapse", "taylor", "penetration"] {
+    for name in [
+        "column",
+        "disks",
+        "bar",
+        "collapse",
+        "taylor",
+        "penetration",
+    ] {
         assert!(
             stdout.lines().any(|l| l.starts_with(name)),
             "list lacks {name}"
@@ -449,6 +456,14 @@ fn check_refuses_what_run_refuses() {
         (
             disks.replace("center = [0.75, 0.75]", "center = [0.35, 0.35]"),
             "bodies[1] overlaps bodies[0]",
+        ),
+        (
+            disks.replacen(
+                "velocity = [0.1, 0.1]",
+                "velocity = [0.1, 0.1]\njitter = 0.7",
+                1,
+            ),
+            "bodies[0]: jitter must lie in [0, 0.5), got 0.7",
         ),
     ];
     for (k, (text, message)) in cases.iter().enumerate() {
