@@ -77,7 +77,7 @@ pub struct GridSpec {
     pub cell_size: f64,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptionsSpec {
     #[serde(default)]
@@ -105,23 +105,6 @@ pub struct OptionsSpec {
     /// Multi-velocity-field contact between materials, with this Coulomb friction.
     #[serde(default)]
     pub contact_friction: Option<f64>,
-}
-
-impl Default for OptionsSpec {
-    fn default() -> Self {
-        OptionsSpec {
-            shape: ShapeKind::default(),
-            rk_order: None,
-            rk_support: None,
-            integration: IntegrationKind::default(),
-            vc_order: None,
-            transfer: TransferKind::default(),
-            flip: None,
-            scheme: Scheme::default(),
-            gravity: None,
-            contact_friction: None,
-        }
-    }
 }
 
 impl OptionsSpec {
@@ -634,7 +617,6 @@ impl MaterialSpec {
 
 impl BodySpec {
     /// Positions, volumes and (optional) velocities of the body's particles.
-    #[allow(clippy::type_complexity)]
     /// The lattice sites `x` (of particles of volume `vol`) moved by `jitter`.
     fn jittered<const D: usize>(
         &self,
@@ -664,6 +646,7 @@ impl BodySpec {
         Ok(x)
     }
 
+    #[allow(clippy::type_complexity)]
     fn particles<const D: usize>(
         &self,
         sim: &Sim<D>,
