@@ -463,33 +463,105 @@ fn vc2_3d_mirror_symmetry_of_a_small_drop() {
     assert!(without < 1e-13, "3D RK2: mirror mismatch {without:e}");
 }
 
-/// A free block's relative drift of total angular momentum (the affine part included) over 100
-/// steps, after the first (which gives the affine matrices: they start at zero).
+/// A free block's relative drift of total angular momentum (the affine part included) over
+/// `steps` steps, after the first (which gives the affine matrices: they start at zero).
 fn angular_drift<const D: usize>(
     shape: Shape,
     order: u32,
     transfer: Transfer,
     linear_fit: bool,
+    steps: usize,
 ) -> f64 {
     let mut sim = free_block::<D>(shape, order, transfer);
     sim.set_vc_linear_fit(linear_fit).unwrap();
-    let dt = sim.stable_dt(0.3).unwrap();
+    // A quarter of the stable step, as for linear momentum: VC2 lets this sheared block's
+    // energy grow after about 0.4 s (2D), past the 1000 steps.
+    let dt = 0.25 * sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
     let start = sim.momenta().angular;
-    for _ in 0..100 {
-        sim.step(dt).unwrap();
+    for _ in 0..steps {
+        if let Err(e) = sim.step(dt) {
+            eprintln!("{e}");
+            return f64::NAN;
+        }
     }
     (sim.momenta().angular - start).norm() / start.norm()
 }
 
+/// Every smooth shape under APIC with VC of the `orders` given (RK2 + VC2 runs with PIC,
+/// which does not conserve angular momentum: its linear momentum is checked above). Linear
+/// hats are not here: cell crossing inverts this sheared block (see `methods`).
+fn apic_methods(orders: &[u32]) -> Vec<(String, Shape, u32)> {
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let shapes = [
+        ("B-spline 2", Shape::BSpline2),
+        ("B-spline 3", Shape::BSpline3),
+        ("RK1", rk1),
+    ];
+    let mut methods = Vec::new();
+    for &order in orders {
+        for (name, shape) in shapes {
+            methods.push((format!("{name} + VC{order}"), shape, order));
+        }
+    }
+    methods
+}
+
 /// Issue target: with VC and a transfer that conserves angular momentum (APIC), a free body's
-/// total angular momentum stays what it was to round-off, for the shapes whose correction can
-/// take the linear fit (`Shape::vc_linear_fit`: the cubic B-spline and RK of support ≥ 2) when
-/// it is switched on (`Sim::set_vc_linear_fit`; off by default: not energy stable). The
-/// order-1 correction subtracts each particle's weighted linear fit of the node coefficients,
-/// so its first moment `Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` vanishes with its sum and a
-/// symmetric stress exerts no torque. Measured 1.7e-14 (2D) and 2.4e-14 (3D) for both. Without
-/// VC, APIC keeps it to 2e-14 (`apic_and_mls_conserve_angular_momentum_with_the_affine_part`).
+/// total angular momentum stays what it was to round-off: the internal forces lose the rigid
+/// rotation that carries their torque, per body (`src/step/vc_torque.rs`). Before, the
+/// correction's first moment let a symmetric stress turn the block: 8.4e-5 to 1.1e-4 of its
+/// angular momentum over these 1000 steps in 2D with VC1. Without VC, APIC keeps it to 2e-14
+/// (`apic_and_mls_conserve_angular_momentum_with_the_affine_part`).
+fn conserves_angular_momentum<const D: usize>(steps: usize, orders: &[u32]) -> Vec<String> {
+    let mut failed = Vec::new();
+    for (name, shape, order) in apic_methods(orders) {
+        let drift = angular_drift::<D>(shape, order, Transfer::Apic, false, steps);
+        eprintln!("{D}D {name}, {steps} steps: angular momentum drift {drift:.2e}");
+        if drift.is_nan() || drift > 1e-12 {
+            failed.push(format!("{D}D {name}: {drift:.1e}"));
+        }
+    }
+    failed
+}
+
+/// Measured 1.8e-14 (B-spline 2), 1.6e-13 (B-spline 3), 1.7e-13 (RK1).
+#[test]
+fn vc1_conserves_angular_momentum_2d() {
+    let failed = conserves_angular_momentum::<2>(1000, &[1]);
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// Measured over 200 steps: VC1 3.7e-15, 4.7e-14, 4.8e-14; VC2 3.0e-15, 4.1e-13, 1.2e-13
+/// (B-spline 2, B-spline 3, RK1).
+#[test]
+fn vc_conserves_angular_momentum_3d() {
+    let failed = conserves_angular_momentum::<3>(200, &[1, 2]);
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// A missed target: in 2D, VC2 with the cubic B-spline and RK1 does not conserve linear
+/// momentum at a few steps (the internal forces summed to 6.07 N/m at step 46 of the cubic
+/// B-spline's run, against 1e-13 at the others), and so angular momentum jumps there:
+/// drift 5.8e-5 (B-spline 3) and 2.5e-6 (RK1) within the first 100 steps, then flat;
+/// B-spline 2 + VC2 keeps both (2.5e-14). The torque of the forces is removed at every step
+/// (checked: 1e-14 of `Σ |f| |x|` after the removal); the sum of a particle's corrected
+/// gradients is what breaks. Over 1000 steps this block's energy also grows with VC2 in 2D
+/// (7.39 to 38 J/m with the cubic B-spline), where it falls with VC1.
+#[test]
+#[ignore = "documents a missed target: 2D VC2 leaks linear momentum at a few steps"]
+fn vc2_conserves_angular_momentum_2d() {
+    let failed = conserves_angular_momentum::<2>(1000, &[2]);
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+/// The linear fit (`Sim::set_vc_linear_fit`) makes each particle's correction torque-free on
+/// its own, for the shapes that allow it (`Shape::vc_linear_fit`): angular momentum to
+/// round-off as well. Measured 1.7e-14 (2D) and 2.5e-14 (3D) over 100 steps of a quarter of
+/// the stable time step.
 #[test]
 fn vc_with_the_linear_fit_conserves_angular_momentum() {
     let rk1 = Shape::Rk {
@@ -500,8 +572,8 @@ fn vc_with_the_linear_fit_conserves_angular_momentum() {
     for (name, shape) in [("B-spline 3 + VC1", Shape::BSpline3), ("RK1 + VC1", rk1)] {
         assert!(shape.vc_linear_fit(), "{name}");
         let (d2, d3) = (
-            angular_drift::<2>(shape, 1, Transfer::Apic, true),
-            angular_drift::<3>(shape, 1, Transfer::Apic, true),
+            angular_drift::<2>(shape, 1, Transfer::Apic, true, 100),
+            angular_drift::<3>(shape, 1, Transfer::Apic, true, 100),
         );
         eprintln!("{name}: 2D {d2:.2e}, 3D {d3:.2e}");
         if d2.max(d3) > 1e-12 {
@@ -509,25 +581,6 @@ fn vc_with_the_linear_fit_conserves_angular_momentum() {
         }
     }
     assert!(failed.is_empty(), "{failed:?}");
-}
-
-/// The quadratic B-spline's support has two nodes per axis where a particle sits at a cell's
-/// middle, too few for a linear fit (the fit's system gains null modes and the solve is ill
-/// posed), so its correction takes the weighted mean only, even with the linear fit switched
-/// on (as every shape does by default): linear momentum is conserved
-/// (`vc_conserves_linear_momentum_2d`) but not angular momentum. Measured 1.6e-4 (2D) and
-/// 1.2e-4 (3D) over 100 steps: what a user of B-spline 2 + VC1 gets, stated in METHOD.md
-/// section 3. The bound is 100 times below, so that the test fails if the statement becomes
-/// false.
-#[test]
-fn vc_with_the_mean_fit_does_not_conserve_angular_momentum() {
-    assert!(!Shape::BSpline2.vc_linear_fit());
-    let (d2, d3) = (
-        angular_drift::<2>(Shape::BSpline2, 1, Transfer::Apic, true),
-        angular_drift::<3>(Shape::BSpline2, 1, Transfer::Apic, true),
-    );
-    eprintln!("B-spline 2 + VC1: 2D {d2:.2e}, 3D {d3:.2e}");
-    assert!(d2.min(d3) > 1e-6, "2D {d2:e}, 3D {d3:e}");
 }
 
 /// The linear fit on two bodies that approach and collide (one node field, RK1 + VC1, APIC, the

@@ -1074,7 +1074,7 @@ impl<'a, const D: usize> NullSpace<'a, D> {
 
 /// The connected bodies of the nodes (slots) that particles join: `stencil(p, visit)` visits
 /// the slots of particle `p`'s support. Returns a body number per slot, numbered from 0.
-fn bodies(
+pub(crate) fn bodies(
     slots: usize,
     particles: usize,
     stencil: impl Fn(usize, &mut dyn FnMut(usize)),

@@ -155,7 +155,7 @@ pub fn grid_update<const D: usize>(
 /// about the receivers' mass centre `x_c`, that is `A J + J A = Σ (f ⊗ r_f − r_f ⊗ f)`,
 /// `J = Σ m r rᵀ` (in 3D `A = [α]×` with `(tr J − J) α` the torque). Returns `(x_c, a, A)`,
 /// `A` zero where `J` cannot carry it (receivers on one line), None without mass or force.
-fn rigid_acceleration<const D: usize>(
+pub(super) fn rigid_acceleration<const D: usize>(
     receivers: &[(Vector<D>, f64)],
     held: &[(Vector<D>, Vector<D>)],
 ) -> Option<(Vector<D>, Vector<D>, Matrix<D>)> {

@@ -43,6 +43,7 @@ mod profile;
 mod reference;
 mod surface;
 mod vc_corrections;
+mod vc_torque;
 pub(crate) use checks::StepLabel;
 pub(crate) use profile::bytes as profile_bytes;
 pub(crate) use profile::lap;
@@ -548,6 +549,9 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
             None,
             &mut work.nodes,
         );
+    if let (Some(_), Some(stored)) = (vc, inputs.stored) {
+        vc_torque::remove_vc_torque(grid, stored, ps.len(), |_| true, &mut work.nodes);
+    }
     if boundary.has_tractions() {
         apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
     }

@@ -782,6 +782,99 @@ fn update_grid<const D: usize>(
     walls.unfold(&sim.grid, nodes);
 }
 
+/// The rigid rotations `g_j(x)` about `centre`: `e_b (x − c)_a − e_a (x − c)_b`, `a < b`.
+fn rotations<const D: usize>(x: &Vector<D>, centre: &Vector<D>) -> Vec<Vector<D>> {
+    let r = x - centre;
+    let mut g = Vec::new();
+    for a in 0..D {
+        for b in a + 1..D {
+            let mut v = Vector::<D>::zeros();
+            v[a] = -r[b];
+            v[b] = r[a];
+            g.push(v);
+        }
+    }
+    g
+}
+
+/// VC's internal forces lose, per connected body of nodes (nodes joined by a particle's
+/// support), the rigid rotation `m_I Σ_j c_j g_j(x_I)` about the body's node mass centre whose
+/// moments `Σ_I g_j(x_I)·f_I` are the forces' own: then they exert no torque.
+fn remove_vc_torque<const D: usize>(
+    sim: &Sim<D>,
+    stencils: &[Stencil<D>],
+    body: Option<u32>,
+    nodes: &mut GridNodes<D>,
+) {
+    let ps = &sim.particles;
+    let mut label: BTreeMap<usize, usize> = BTreeMap::new();
+    let of_particle: Vec<Vec<usize>> = (0..ps.len())
+        .map(|p| match body.is_some_and(|b| ps.material[p] != b) {
+            true => Vec::new(),
+            false => (stencils[p].nodes.iter().enumerate())
+                .filter(|&(k, _)| {
+                    stencils[p].values[k] != 0.0 || stencils[p].gradients[k] != Vector::<D>::zeros()
+                })
+                .map(|(_, &n)| n)
+                .collect(),
+        })
+        .collect();
+    // Labels spread along the particles' supports until no label changes.
+    for ns in &of_particle {
+        for &n in ns {
+            let next = label.len();
+            label.entry(n).or_insert(next);
+        }
+    }
+    let mut changed = true;
+    while changed {
+        changed = false;
+        for ns in &of_particle {
+            let least = ns.iter().map(|n| label[n]).min();
+            for n in ns {
+                if Some(label[n]) != least {
+                    label.insert(*n, least.unwrap());
+                    changed = true;
+                }
+            }
+        }
+    }
+    let mut members: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (&n, &l) in &label {
+        members.entry(l).or_default().push(n);
+    }
+    let position = |n: usize| node_position(&sim.grid, n);
+    for ns in members.values() {
+        let total: f64 = ns.iter().map(|&n| nodes.mass[n]).sum();
+        if total <= 0.0 {
+            continue;
+        }
+        let centre = ns
+            .iter()
+            .map(|&n| nodes.mass[n] * position(n))
+            .sum::<Vector<D>>()
+            / total;
+        let count = rotations(&centre, &centre).len();
+        let mut gram = DMatrix::<f64>::zeros(count, count);
+        let mut moments = DVector::<f64>::zeros(count);
+        for &n in ns {
+            let g = rotations(&position(n), &centre);
+            for i in 0..count {
+                moments[i] += g[i].dot(&nodes.force[n]);
+                for j in 0..count {
+                    gram[(i, j)] += nodes.mass[n] * g[i].dot(&g[j]);
+                }
+            }
+        }
+        let tolerance = 1e-12 * gram.norm();
+        let c = gram.pseudo_inverse(tolerance).expect("an SVD") * moments;
+        for &n in ns {
+            let g = rotations(&position(n), &centre);
+            nodes.force[n] -= nodes.mass[n] * (0..count).map(|i| c[i] * g[i]).sum::<Vector<D>>();
+        }
+    }
+}
+
 /// `Σ_I Ψ_I v_I`, `Σ_I Ψ_I (v_I − v_old_I)`, `Σ_I Ψ_I v_I (x_I − x_p)ᵀ` and `Σ_I v_I ⊗ ∇Ψ_I`.
 fn gather<const D: usize>(
     grid: &Grid<D>,
@@ -865,6 +958,9 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
             body,
         };
         map_to_grid(sim, &stencils, &map, &mut nodes);
+        if vc.is_some() {
+            remove_vc_torque(sim, &stencils, body, &mut nodes);
+        }
         // The given boundary points' tractions: `t_b |n_b a_b|` on the nodes by `Ψ_I(x_b)`.
         if sim.boundary.has_tractions() {
             for b in 0..sim.boundary.len() {
