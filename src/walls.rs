@@ -209,6 +209,15 @@ impl<const D: usize> Walls<D> {
         }
     }
 
+    /// Whether a wall acts on node `i`: it lies on a wall's face or beyond it.
+    pub fn acts_on(&self, grid: &Grid<D>, i: &[i64; D]) -> bool {
+        (0..D).any(|a| {
+            [Side::Low, Side::High]
+                .into_iter()
+                .any(|s| self.faces[a][s as usize] != Wall::Free && depth(grid, i, a, s) >= 0)
+        })
+    }
+
     /// Whether any face is a wall.
     pub fn any_wall(&self) -> bool {
         self.faces.iter().flatten().any(|b| *b != Wall::Free)

@@ -103,6 +103,11 @@ struct RunArgs {
     /// No progress bar, only the summary.
     #[arg(long, short)]
     quiet: bool,
+    /// Also runs each body alone (no output) and splits the energy the summary puts on the
+    /// impacts and the scheme into the bodies' own (transfers, time integration, walls) and
+    /// their impacts on each other. Scenes of two bodies or more.
+    #[arg(long)]
+    split_dissipation: bool,
 }
 
 fn main() -> ExitCode {
@@ -361,6 +366,9 @@ fn run_scenes<const D: usize>(
         picture(&[(&*sim, method(sim))])?;
         return Err(e);
     }
+    if args.split_dissipation {
+        split_dissipation(scene, sim)?;
+    }
     let other = match other {
         Some((s, o)) => {
             println!("\ncompared with the [compare] options:");
@@ -375,6 +383,56 @@ fn run_scenes<const D: usize>(
     }
     picture(&runs)?;
     Ok(())
+}
+
+/// Splits the energy no term of the ledger measures (`other_dissipation`: the transfers, the
+/// time integration, impacts) by running each body of the scene alone to the same time with
+/// the same options: what the bodies lose alone is the scheme's (and the walls'), the rest is
+/// what their impacts on each other took.
+fn split_dissipation<const D: usize>(scene: &Scene, sim: &Sim<D>) -> Result<(), String> {
+    if scene.bodies.len() < 2 {
+        return Err(format!(
+            "--split-dissipation: the scene has {} body; the split needs two or more",
+            scene.bodies.len()
+        ));
+    }
+    let together = sim
+        .energy_balance()
+        .map_err(|e| e.message)?
+        .other_dissipation;
+    let mut alone = 0.0;
+    for (b, body) in scene.bodies.iter().enumerate() {
+        let mut one = scene.clone();
+        one.bodies = vec![body.clone()];
+        one.compare = None;
+        alone += other_dissipation_alone(&one, sim.time())
+            .map_err(|e| format!("--split-dissipation, body {} alone: {e}", b + 1))?;
+    }
+    println!(
+        "                       of which each body alone (transfers, time integration, walls) \
+         {alone:.4e}, the bodies' impacts on each other {:.4e}",
+        together - alone
+    );
+    Ok(())
+}
+
+/// The energy no term of the ledger measures, of `scene` run from its start to `end`.
+fn other_dissipation_alone(scene: &Scene, end: f64) -> Result<f64, String> {
+    fn run<const D: usize>(mut sim: Sim<D>, scene: &Scene, end: f64) -> Result<f64, String> {
+        sim.set_energy_accounting(true);
+        sim.set_max_steps_per_advance(scene.run.max_steps)
+            .map_err(|e| e.message)?;
+        sim.advance(end, scene.run.cfl)
+            .map_err(|e| plain_reason(&e.message))?;
+        Ok(sim
+            .energy_balance()
+            .map_err(|e| e.message)?
+            .other_dissipation)
+    }
+    match scene.build().map_err(|e| e.message)? {
+        SceneSim::D2(sim) => run(sim, scene, end),
+        SceneSim::D3(sim) => run(sim, scene, end),
+    }
 }
 
 /// The method of a run in a mechanician's words: shape functions, integration, transfer.

@@ -27,8 +27,10 @@
 //! mean, `w_Ip (ζ_I − μ_p − C_p u_Ip)` with
 //! `u_Ip` the node offsets in the particle's frame ([`linear_frame`]), so that the correction's
 //! first moment `Σ_I (x_I − x_p) ⊗ (∇̂Ψ_I − ∇Ψ_I)` vanishes too and a symmetric stress exerts no
-//! torque (angular momentum conserved with APIC); linear hats and the quadratic B-spline take
-//! the mean (two nodes per axis in places: the fit would leave free values per particle).
+//! torque; linear hats and the quadratic B-spline take the mean (two nodes per axis in
+//! places: the fit would leave free values per particle). Whatever the fit, the step removes
+//! the internal forces' torque per body (`crate::step` `vc_torque`), so that angular momentum
+//! is conserved with APIC.
 //! The equalities then couple the nodes through the fits:
 //! `K ζ = rhs`, `(K ζ)_I = A_I ζ_I − Σ_p V_p w_Ip Q_I(x_p) μ_p` (the fitted value at order 1),
 //! `A_I = Σ_p V_p w_Ip Q Qᵀ`, a symmetric positive semi-definite system (a weighted residual:

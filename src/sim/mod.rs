@@ -294,10 +294,10 @@ impl<const D: usize> Sim<D> {
     /// **Experimental.** Whether VC of order 1 corrects with each particle's weighted linear fit
     /// of the node coefficients instead of their mean (off by default; before stepping only;
     /// not kept by checkpoints). With the shapes that allow it ([`Shape::vc_linear_fit`]: the
-    /// cubic B-spline, RK of support ≥ 2) the correction then has no first moment, a symmetric
-    /// stress exerts no torque, and with APIC a free body's angular momentum is conserved to
-    /// round-off (1.7e-14 in 2D, 2.4e-14 in 3D over 100 steps, against 1e-5 to 1e-3 with the
-    /// mean). The default scene's colliding disks (RK1 + VC1) lose energy with it as with the
+    /// cubic B-spline, RK of support ≥ 2) each particle's correction then has no first moment
+    /// and exerts no torque on its own (with the mean, every step removes the internal forces'
+    /// torque per body instead: angular momentum is conserved with APIC either way, METHOD.md
+    /// section 3). The default scene's colliding disks (RK1 + VC1) lose energy with it as with the
     /// mean, 2.54 to 1.98 J/m (mean: 1.98). It is off by default until the convergence study
     /// has been rerun with it and its cost measured: its solve takes 40–110 iterations a step
     /// where the mean's takes about 12 (docs/METHOD.md, section 3).

@@ -114,7 +114,7 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
         if let (Some(_), Some(stored)) = (vc, stored) {
             let material = &ps.material;
             let in_body = |p: usize| material[p] == b as u32;
-            super::vc_torque::remove_vc_torque(grid, stored, ps.len(), in_body, nodes);
+            super::vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), in_body, nodes);
         }
         let friction = grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
         if rigid[b].is_none() {

@@ -18,6 +18,17 @@ use rayon::prelude::*;
 /// field as one mass-weighted acceleration (without walls), so momentum is conserved.
 const EDGE_MASS_FRACTION: f64 = 1e-2;
 
+/// The node mass the internal force is divided by at least: [`EDGE_MASS_FRACTION`] of the
+/// largest node mass.
+pub(super) fn edge_mass_floor<const D: usize>(nodes: &GridNodes<D>) -> f64 {
+    EDGE_MASS_FRACTION
+        * nodes
+            .active
+            .iter()
+            .map(|&n| nodes.mass[n])
+            .fold(0.0, f64::max)
+}
+
 /// Updates the velocities of the active nodes.
 ///
 /// With `dt = Some(Δt)`: folds mass, momentum and force of mirrored walls, sets
@@ -45,14 +56,7 @@ pub fn grid_update<const D: usize>(
     // force; their acceleration is taken against at least a fraction of the largest node mass
     // (see [`EDGE_MASS_FRACTION`]). The limit is on exactly when the body force is kept apart.
     let force_mass_floor = match (!nodes.body_force.is_empty(), dt) {
-        (true, Some(_)) => {
-            EDGE_MASS_FRACTION
-                * nodes
-                    .active
-                    .iter()
-                    .map(|&n| nodes.mass[n])
-                    .fold(0.0, f64::max)
-        }
+        (true, Some(_)) => edge_mass_floor(nodes),
         _ => 0.0,
     };
     // Every active node on its own, in parallel (the list holds each node once).

@@ -550,7 +550,8 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
             &mut work.nodes,
         );
     if let (Some(_), Some(stored)) = (vc, inputs.stored) {
-        vc_torque::remove_vc_torque(grid, stored, ps.len(), |_| true, &mut work.nodes);
+        let walls = inputs.walls;
+        vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), |_| true, &mut work.nodes);
     }
     if boundary.has_tractions() {
         apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);

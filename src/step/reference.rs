@@ -798,7 +798,7 @@ fn rotations<const D: usize>(x: &Vector<D>, centre: &Vector<D>) -> Vec<Vector<D>
 }
 
 /// VC's internal forces lose, per connected body of nodes (nodes joined by a particle's
-/// support), the rigid rotation `m_I Σ_j c_j g_j(x_I)` about the body's node mass centre whose
+/// support) that no wall acts on, the rigid rotation `m_I Σ_j c_j g_j(x_I)` about the body's node mass centre whose
 /// moments `Σ_I g_j(x_I)·f_I` are the forces' own: then they exert no torque.
 fn remove_vc_torque<const D: usize>(
     sim: &Sim<D>,
@@ -844,9 +844,24 @@ fn remove_vc_torque<const D: usize>(
         members.entry(l).or_default().push(n);
     }
     let position = |n: usize| node_position(&sim.grid, n);
+    // With walls, the forces as the grid update applies them: a node below 1 % of the largest
+    // node mass keeps `m / m_floor` of its force, the rest is dropped.
+    let largest = (nodes.active.iter())
+        .map(|&n| nodes.mass[n])
+        .fold(0.0, f64::max);
+    let floor = match sim.options.walls.any_wall() {
+        true => 1e-2 * largest,
+        false => 0.0,
+    };
+    let applied = |m: f64| if m < floor { m / floor } else { 1.0 };
+    let walls = &sim.options.walls;
     for ns in members.values() {
         let total: f64 = ns.iter().map(|&n| nodes.mass[n]).sum();
-        if total <= 0.0 {
+        // Bodies that a wall acts on keep their torque.
+        let walled = ns
+            .iter()
+            .any(|&n| walls.acts_on(&sim.grid, &sim.grid.node_multi_index(n)));
+        if total <= 0.0 || walled {
             continue;
         }
         let centre = ns
@@ -860,7 +875,7 @@ fn remove_vc_torque<const D: usize>(
         for &n in ns {
             let g = rotations(&position(n), &centre);
             for i in 0..count {
-                moments[i] += g[i].dot(&nodes.force[n]);
+                moments[i] += g[i].dot(&(applied(nodes.mass[n]) * nodes.force[n]));
                 for j in 0..count {
                     gram[(i, j)] += nodes.mass[n] * g[i].dot(&g[j]);
                 }
@@ -1359,7 +1374,11 @@ mod tests {
     /// step, which four steps and the stiff material's stresses amplify: the largest difference
     /// over these cases is 7e-13 of the field's largest value (stresses), and the bound is
     /// 1e-11 (with VC1 9e-13, with VC2 1.8e-12: its conjugate gradients stop at 1e-12 of
-    /// the right-hand side). Dropping the friction walls' friction differs by 3e-3;
+    /// the right-hand side). With VC2 the bound is 3e-10: once VC's torque is removed per body,
+    /// RK2 + VC2 beside a wall differs by up to 3.1e-11 in the cases seen (the removal spreads
+    /// the round-off of the body's total torque, a sum over nodes the particles barely reach
+    /// with large forces, over all its nodes); ten times that, still ten times below what
+    /// scaling VC's corrections by `1 + 1e-7` gives. Dropping the friction walls' friction differs by 3e-3;
     /// scaling APIC's `B` by `1 + 1e-7` differs by 1e-10, VC's corrections by `1 + 1e-7` by
     /// 3e-9.
     fn same_steps<const D: usize>(case: &Case) -> std::result::Result<(), TestCaseError> {
@@ -1372,6 +1391,7 @@ mod tests {
                 return Ok(());
             }
         }
+        let bound = if case.vc == 2 { 3e-10 } else { 1e-11 };
         for field in [
             Field::Position,
             Field::Velocity,
@@ -1386,7 +1406,7 @@ mod tests {
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f64::max);
             prop_assert!(
-                worst <= 1e-11 * scale,
+                worst <= bound * scale,
                 "{:?}: differs by {:e} of {:e}",
                 field,
                 worst,
