@@ -741,18 +741,10 @@ fn update_grid<const D: usize>(
             .sum::<Vector<D>>()
             / total;
         let modes = |x: &Vector<D>| -> Vec<Vector<D>> {
-            let x = x - centre;
             let mut g: Vec<Vector<D>> = (0..D)
                 .map(|k| Vector::<D>::from_fn(|i, _| if i == k { 1.0 } else { 0.0 }))
                 .collect();
-            for a in 0..D {
-                for b in a + 1..D {
-                    let mut r = Vector::<D>::zeros();
-                    r[a] = -x[b];
-                    r[b] = x[a];
-                    g.push(r);
-                }
-            }
+            g.extend(rotations(x, &centre));
             g
         };
         let count = modes(&Vector::zeros()).len();
@@ -798,8 +790,9 @@ fn rotations<const D: usize>(x: &Vector<D>, centre: &Vector<D>) -> Vec<Vector<D>
 }
 
 /// VC's internal forces lose, per connected body of nodes (nodes joined by a particle's
-/// support) that no wall acts on, the rigid rotation `m_I Σ_j c_j g_j(x_I)` about the body's node mass centre whose
-/// moments `Σ_I g_j(x_I)·f_I` are the forces' own: then they exert no torque.
+/// support) that no wall acts on, the rigid rotation `m_I Σ_j c_j g_j(x_I)` about the body's
+/// node mass centre whose moments `Σ_I g_j(x_I)·f_I` are the forces' own: then they exert no
+/// torque.
 fn remove_vc_torque<const D: usize>(
     sim: &Sim<D>,
     stencils: &[Stencil<D>],
@@ -1378,9 +1371,9 @@ mod tests {
     /// RK2 + VC2 beside a wall differs by up to 3.1e-11 in the cases seen (the removal spreads
     /// the round-off of the body's total torque, a sum over nodes the particles barely reach
     /// with large forces, over all its nodes); ten times that, still ten times below what
-    /// scaling VC's corrections by `1 + 1e-7` gives. Dropping the friction walls' friction differs by 3e-3;
-    /// scaling APIC's `B` by `1 + 1e-7` differs by 1e-10, VC's corrections by `1 + 1e-7` by
-    /// 3e-9.
+    /// scaling VC's corrections by `1 + 1e-7` gives. Dropping the friction walls' friction
+    /// differs by 3e-3; scaling APIC's `B` by `1 + 1e-7` differs by 1e-10, VC's corrections by
+    /// `1 + 1e-7` by 3e-9.
     fn same_steps<const D: usize>(case: &Case) -> std::result::Result<(), TestCaseError> {
         let (mut fast, mut reference) = (scene::<D>(case), scene::<D>(case));
         for _ in 0..4 {
