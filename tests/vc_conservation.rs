@@ -313,8 +313,10 @@ const FIXED: (&str, Wall) = ("fixed", Wall::Fixed);
 /// Without VC the mismatch is the round-off of the fall and the impact: 7.1e-15 measured in
 /// 2D. VC of order 1 adds nothing measurable (5.9e-15 to 4.9e-14, every floor). At order 2 the
 /// solve stops at 1e-12 of the right-hand side (or within `VC_SOLVE_ATTAINABLE` of it), and
-/// the round-off of its sums is not mirror symmetric: 4.9e-14 measured. The bounds are about
-/// 10 times these. The mismatch was 5e-2 when RK2's edge lumping weighted the correction with
+/// the round-off of its sums is not mirror symmetric: 8.4e-13 measured (4.9e-14 before the
+/// solve damped the body's edge nodes, `VC_REGULARISATION`, which the 1e-12 target
+/// for every method is now just above on slip and fixed floors: see
+/// `vc2_mirror_symmetry_on_slip_and_fixed_floors`). The bounds are about 10 times these. The mismatch was 5e-2 when RK2's edge lumping weighted the correction with
 /// the transfer weights instead of Ψ.
 #[test]
 fn vc_keeps_a_dropped_block_mirror_symmetric_2d() {
@@ -349,7 +351,7 @@ fn vc_keeps_a_dropped_block_mirror_symmetric_2d() {
         ),
         ("RK1 + VC1", RK1, vc1, APIC, FRICTION, 1e-13, false),
         ("RK2", RK2, None, PIC, FRICTION, 1e-13, false),
-        ("RK2 + VC2", RK2, Some(2), PIC, FRICTION, 1e-12, false),
+        ("RK2 + VC2", RK2, Some(2), PIC, FRICTION, 1e-11, false),
         (
             "B-spline 3 + VC1",
             Shape::BSpline3,
@@ -412,9 +414,9 @@ fn vc_keeps_a_dropped_block_mirror_symmetric_on_every_floor() {
 }
 
 /// 2D RK2 + VC2 dropped onto a slip or a fixed floor. **Not met**: the mirror mismatch is
-/// 6.0e-3 (slip) and 7.7e-3 (fixed) at the end of the drop, against 4.9e-14 on the friction
-/// floor (`vc_keeps_a_dropped_block_mirror_symmetric_2d`). Kept to document the miss (the
-/// order-2 solve on the nodes a wall constrains is the likely place: not yet traced).
+/// 1.4e-10 (slip) and 4.7e-10 (fixed) at the end of the drop (6.0e-3 and 7.7e-3 before the
+/// order-2 solve damped the body's edge nodes), against 4.9e-14 on the friction floor
+/// (`vc_keeps_a_dropped_block_mirror_symmetric_2d`). About 11 s each.
 #[test]
 #[ignore = "documents a missed target: 2D RK2 + VC2 on slip and fixed floors"]
 fn vc2_mirror_symmetry_on_slip_and_fixed_floors() {
@@ -427,18 +429,14 @@ fn vc2_mirror_symmetry_on_slip_and_fixed_floors() {
 
 /// 3D RK2 + VC2 on a small drop (8 cells, 8 particles across; its system on the study's
 /// 16 cells is above the assembly's size limit and took over 20 minutes matrix-free).
-/// **The target, symmetry to round-off, is not met here**: the mismatch is 6.5e-14 after 28
-/// steps, then jumps in three steps (30, 34, 36: velocity mismatches of 5.7e-10, 2.9e-8 and
-/// 8.7e-7 at particles on the block's outer x faces, far from the mirror plane) to 4.4e-9 at
-/// step 40 and 3.2e-9 at step 120 (0.12 s, 112 s of run time). With the solve's tolerance at
-/// 1e-10 instead of 1e-12 the early steps' mismatch is 100 times larger (step 10: 5.2e-13
-/// against 2.2e-15) but step 40's is the same (4.95e-9): the jumps do not come from the
-/// tolerance. Likely (not verified): the components of the solution along the near-null
-/// directions of nodes the particles barely reach, which conjugate gradients leave at
-/// whatever its iterates hold, without mirror symmetry. Without VC (2.2e-15) and with VC1
-/// (2.7e-15) the same drop keeps it. The bound guards what holds now (42 steps, about 45 s).
+/// **The target, symmetry to round-off, is not met here**: the mismatch is 3.0e-10 after 42
+/// steps (1.3e-9 before the order-2 solve damped the body's edge nodes, from jumps at steps
+/// 30–36 at particles on the block's outer x faces, far from the mirror plane). With the
+/// solve's tolerance at 1e-10 instead of 1e-12 the early steps' mismatch was 100 times larger
+/// but step 40's the same: the rest does not come from the tolerance. Without VC (2.2e-15)
+/// and with VC1 (2.7e-15) the same drop keeps it. The bound guards what holds now (about 35 s).
 #[test]
-#[ignore = "long (45 s); documents a missed target: 3D RK2 + VC2 mirror symmetry"]
+#[ignore = "long (35 s); documents a missed target: 3D RK2 + VC2 mirror symmetry"]
 fn vc2_3d_mirror_symmetry_of_a_small_drop() {
     let rk2 = Shape::Rk {
         order: 2,
@@ -456,7 +454,7 @@ fn vc2_3d_mirror_symmetry_of_a_small_drop() {
     let mismatch = mirror_mismatch_of_drop::<3>(rk2, Some(2), pic, drop);
     eprintln!("3D RK2 + VC2, small drop: mirror mismatch {mismatch:.2e}");
     assert!(
-        mismatch < 1e-8,
+        mismatch < 3e-9,
         "3D RK2 + VC2: mirror mismatch {mismatch:e}"
     );
     let without = mirror_mismatch_of_drop::<3>(rk2, None, pic, drop);
@@ -478,13 +476,15 @@ fn angular_drift<const D: usize>(
     // energy grow after about 0.4 s (2D), past the 1000 steps.
     let dt = 0.25 * sim.stable_dt(0.3).unwrap();
     sim.step(dt).unwrap();
-    let start = sim.momenta().angular;
+    let (start, energy) = (sim.momenta().angular, sim.energies().total());
     for _ in 0..steps {
         if let Err(e) = sim.step(dt) {
             eprintln!("{e}");
             return f64::NAN;
         }
     }
+    let end = sim.energies().total();
+    eprintln!("  total energy {energy:.4e} -> {end:.4e}");
     (sim.momenta().angular - start).norm() / start.norm()
 }
 
@@ -528,10 +528,13 @@ fn conserves_angular_momentum<const D: usize>(steps: usize, orders: &[u32]) -> V
     failed
 }
 
-/// Measured 1.8e-14 (B-spline 2), 1.6e-13 (B-spline 3), 1.7e-13 (RK1).
+/// Measured VC1 1.8e-14 (B-spline 2), 1.6e-13 (B-spline 3), 1.7e-13 (RK1); VC2 1.8e-14,
+/// 1.7e-13, 1.7e-13. VC2 leaked linear momentum at a few steps (drift 5.8e-5 and 2.5e-6 with
+/// the cubic B-spline and RK1) until its solve damped the body's edge nodes
+/// (`VC_REGULARISATION` in `src/integration/mod.rs`).
 #[test]
-fn vc1_conserves_angular_momentum_2d() {
-    let failed = conserves_angular_momentum::<2>(1000, &[1]);
+fn vc_conserves_angular_momentum_2d() {
+    let failed = conserves_angular_momentum::<2>(1000, &[1, 2]);
     assert!(failed.is_empty(), "{failed:?}");
 }
 
@@ -540,26 +543,6 @@ fn vc1_conserves_angular_momentum_2d() {
 #[test]
 fn vc_conserves_angular_momentum_3d() {
     let failed = conserves_angular_momentum::<3>(200, &[1, 2]);
-    assert!(failed.is_empty(), "{failed:?}");
-}
-
-/// A missed target: in 2D, VC2 with the cubic B-spline and RK1 does not conserve linear
-/// momentum at a few steps (the internal forces summed to 6.07 N/m at step 46 of the cubic
-/// B-spline's run, against 1e-13 at the others), and so angular momentum jumps there:
-/// drift 5.8e-5 (B-spline 3) and 2.5e-6 (RK1) within the first 100 steps, then flat;
-/// B-spline 2 + VC2 keeps both (2.5e-14). The torque of the forces is removed at every step
-/// (checked: 1e-14 of `Σ |f| |x|` after the removal); the sum of a particle's corrected
-/// gradients is what breaks: at those steps the order-2 solve (not projected off `K`'s null
-/// space, unlike order 1) returns node coefficients of 1e14 to 5e16 / h (1e5 / h at the
-/// others), mostly along the null space, which changes no gradient in exact arithmetic, and the
-/// round-off of their sums reaches 0.1–0.25 of a particle's correction. Bounding the
-/// coefficients at 1e8 / h instead inverted a particle at step 46: the null part must be
-/// projected off the solution (the fix the 3D mirror symmetry of RK2 + VC2 needs too). Over 1000 steps this block's energy also grows with VC2 in 2D
-/// (7.39 to 38 J/m with the cubic B-spline), where it falls with VC1.
-#[test]
-#[ignore = "documents a missed target: 2D VC2 leaks linear momentum at a few steps"]
-fn vc2_conserves_angular_momentum_2d() {
-    let failed = conserves_angular_momentum::<2>(1000, &[2]);
     assert!(failed.is_empty(), "{failed:?}");
 }
 

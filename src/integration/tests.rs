@@ -79,6 +79,8 @@ enum Solve {
     MatrixFree,
     /// Assembled, with the V-cycle on any grid.
     Multilevel,
+    /// As `Auto`, without the order-2 damping (`VC_REGULARISATION`).
+    Undamped,
 }
 
 /// The VC correction of order `order` for the stencils [`prepare_stencils`] computed.
@@ -95,6 +97,7 @@ fn correction<const D: usize>(
     vc.linear_fit = sim.vc.as_ref().is_some_and(|vc| vc.linear_fit);
     vc.matrix_free = solve == Solve::MatrixFree;
     vc.multilevel = solve == Solve::Multilevel;
+    vc.undamped = solve == Solve::Undamped;
     let inputs = VcInputs {
         grid,
         bins: &work.bins,
@@ -130,8 +133,19 @@ fn corrections_of<const D: usize>(
 /// The residuals `Σ_p ∇̂Ψ_I Q V_p + Σ_p Ψ_I ∇Q V_p − Σ_b Ψ_I Q n a` of every node and
 /// monomial `Q` of degree < `order`, largest absolute value.
 fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, order: u32) -> f64 {
+    divergence_residual_of(sim, vc_order, order, Solve::Auto).0
+}
+
+/// [`divergence_residual`] with VC's solve taken as `solve` says: the largest over every node,
+/// and over the nodes not at a body's edge (`VcCorrection::at_edge`).
+fn divergence_residual_of<const D: usize>(
+    sim: &mut Sim<D>,
+    vc_order: Option<u32>,
+    order: u32,
+    solve: Solve,
+) -> (f64, f64) {
     let (grid, ps, volumes) = prepare_stencils(sim);
-    let vc = vc_order.map(|o| correction(sim, &grid, &ps, &volumes, o, Solve::Auto));
+    let vc = vc_order.map(|o| correction(sim, &grid, &ps, &volumes, o, solve));
     let work = &mut sim.work;
     let q_basis = VcCorrection::<D>::new(order).unwrap();
     let m = q_basis.m();
@@ -194,10 +208,16 @@ fn divergence_residual<const D: usize>(sim: &mut Sim<D>, vc_order: Option<u32>, 
     for n in &reduced {
         res.remove(n);
     }
+    let largest = |r: &[f64]| r.iter().fold(0.0f64, |a, &v| a.max(v.abs()));
+    let (mut all, mut inside) = (0.0f64, 0.0f64);
+    for (&n, r) in &res {
+        all = all.max(largest(r));
+        if !vc.as_ref().is_some_and(|vc| vc.at_edge(&work.nodes, n)) {
+            inside = inside.max(largest(r));
+        }
+    }
     work.nodes.reset();
-    res.values()
-        .flat_map(|r| r.iter())
-        .fold(0.0f64, |a, &v| a.max(v.abs()))
+    (all, inside)
 }
 
 /// After the first-order correction the divergence equality holds to round-off for jittered
@@ -397,7 +417,10 @@ fn first_order_solve_iterations_grow_slowly_with_the_linear_fit() {
 /// not. Nodes whose support holds too few particles for a 3×3 (4×4) moment matrix (the body's
 /// corners) fall back to order 1 and are left out. The conservative solve stops at 1e-12 of the
 /// right-hand side's preconditioned norm (`VC_SOLVE_TOLERANCE`) with node blocks of condition
-/// numbers up to ~1e3, so 1e-12 on sums of size 0.1.
+/// numbers up to ~1e3, so 1e-12 on sums of size 0.1: met everywhere by the undamped solve, and
+/// by the step's solve away from the body's edge, whose damping (`VC_REGULARISATION`) gives up
+/// there what the equalities could get only by amplifying near-null directions (measured
+/// 1.6e-4 and 7.3e-5 in 2D, 1.1e-6 and 3.5e-7 in 3D; bound: ten times the largest).
 #[test]
 fn second_order_divergence_equality() {
     for shape in [
@@ -408,21 +431,27 @@ fn second_order_divergence_equality() {
         },
     ] {
         let mut s2 = jittered_box::<2>(shape, Some(2), 0.4);
-        let with = divergence_residual(&mut s2, Some(2), 2);
+        let (edge, inside) = divergence_residual_of(&mut s2, Some(2), 2, Solve::Auto);
+        let (exact, _) = divergence_residual_of(&mut s2, Some(2), 2, Solve::Undamped);
         let first = divergence_residual(&mut s2, Some(1), 2);
+        eprintln!("{shape:?} 2D: {inside:e} inside, {edge:e} with the edge; undamped {exact:e}");
         assert!(
-            with < 1e-12,
-            "{shape:?} 2D: order-2 residual with VC2 {with:e}"
+            inside < 1e-12 && exact < 1e-12 && edge < 2e-3,
+            "{shape:?} 2D: order-2 residual with VC2 {inside:e} inside, {edge:e} with the edge, \
+             {exact:e} undamped"
         );
         assert!(
             first > 1e-6,
             "{shape:?} 2D: order-2 residual with VC1 {first:e}"
         );
         let mut s3 = jittered_box::<3>(shape, Some(2), 0.4);
-        let with = divergence_residual(&mut s3, Some(2), 2);
+        let (edge, inside) = divergence_residual_of(&mut s3, Some(2), 2, Solve::Auto);
+        let (exact, _) = divergence_residual_of(&mut s3, Some(2), 2, Solve::Undamped);
+        eprintln!("{shape:?} 3D: {inside:e} inside, {edge:e} with the edge; undamped {exact:e}");
         assert!(
-            with < 1e-12,
-            "{shape:?} 3D: order-2 residual with VC2 {with:e}"
+            inside < 1e-12 && exact < 1e-12 && edge < 2e-5,
+            "{shape:?} 3D: order-2 residual with VC2 {inside:e} inside, {edge:e} with the edge, \
+             {exact:e} undamped"
         );
     }
 }

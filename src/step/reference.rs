@@ -18,7 +18,7 @@
 //! fast step runs conjugate gradients preconditioned with the node blocks or a V-cycle.
 
 use crate::grid::{EdgeLumping, Grid, GridNodes};
-use crate::integration::VC_MAX_CORRECTION;
+use crate::integration::{VC_EDGE_REACH, VC_MAX_CORRECTION, VC_REGULARISATION};
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::options::{Shape, Transfer};
 use crate::sim::Sim;
@@ -382,9 +382,10 @@ const VC_NULL_EIGENVALUE: f64 = 1e-12;
 /// per body, its least-squares fit by the node coefficients of the polynomials of degree < n
 /// (`K`'s null space for a body without such nodes), re-expanded about each node, before those
 /// nodes' higher rows are dropped. The system is scaled by the Cholesky factors of the blocks
-/// `A_I` (the fast step's preconditioner) and solved by the pseudo-inverse of its eigenvalues
-/// above `VC_NULL_EIGENVALUE`: the solution of least `Σ_I ζ_Iᵀ A_I ζ_I`, where the fast step's
-/// conjugate gradients, started from zero, converge.
+/// `A_I` (the fast step's preconditioner), damped at the edge nodes as the fast step damps it
+/// (`K + ε E A`, `VC_REGULARISATION`: `ε` on their scaled diagonal) and solved by the
+/// pseudo-inverse of its eigenvalues above `VC_NULL_EIGENVALUE`: where the fast step's conjugate
+/// gradients, started from zero, converge.
 fn vc_corrections_higher_order<const D: usize>(
     sim: &Sim<D>,
     all_stencils: &[Stencil<D>],
@@ -536,7 +537,16 @@ fn vc_corrections_higher_order<const D: usize>(
     let inverse = factor
         .try_inverse()
         .expect("the node blocks' Cholesky factors");
-    let scaled = &inverse * &k * inverse.transpose();
+    let mut scaled = &inverse * &k * inverse.transpose();
+    // The edge nodes' damping `ε A_I`: `ε` on their unknowns once scaled.
+    let reach = a.iter().map(|a| a[(0, 0)]).fold(0.0, f64::max);
+    for i in 0..used {
+        if reduced[i] || a[i][(0, 0)] < VC_EDGE_REACH * reach {
+            for al in 0..width[i] {
+                scaled[(first[i] + al, first[i] + al)] += VC_REGULARISATION;
+            }
+        }
+    }
     let eigen = scaled.symmetric_eigen();
     let largest = eigen.eigenvalues.amax();
     let mut zeta = vec![DMatrix::<f64>::zeros(m, D); used];
