@@ -183,6 +183,9 @@ pub struct VcCorrection<const D: usize> {
     used: Vec<bool>,
     /// Slots whose moment matrix was singular, corrected to order 1 only.
     reduced: Vec<bool>,
+    /// At order ≥ 2, the slots at a body's edge, where the solve is damped
+    /// (`VC_REGULARISATION`).
+    edge: Vec<bool>,
     /// Per particle: the mean `μ_p` of the node corrections over its support, per direction,
     /// and at order 1 the slope `C_p` of their linear fit (zero at order ≥ 2).
     fit: Vec<(Vector<D>, Matrix<D>)>,
@@ -219,6 +222,7 @@ impl<const D: usize> VcCorrection<D> {
             xi: Vec::new(),
             used: Vec::new(),
             reduced: Vec::new(),
+            edge: Vec::new(),
             fit: Vec::new(),
             frame: Vec::new(),
             linear_fit: false,
@@ -678,9 +682,12 @@ impl<const D: usize> VcCorrection<D> {
             .filter(|&slot| used[slot])
             .map(|slot| moment[slot * m * m])
             .fold(0.0, f64::max);
-        let edge = |slot: usize| {
+        let mut edge = std::mem::take(&mut self.edge);
+        edge.clear();
+        edge.extend((0..slots).map(|slot| {
             used[slot] && (reduced[slot] || moment[slot * m * m] < VC_EDGE_REACH * reach)
-        };
+        }));
+        let edge = edge;
         let apply = |zeta: &[f64], out: &mut [f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
             product(zeta, out, fit);
             if m > 1 && damping > 0.0 {
@@ -688,7 +695,7 @@ impl<const D: usize> VcCorrection<D> {
                     .zip(zeta.par_chunks_exact(m * D))
                     .enumerate()
                     .for_each(|(slot, (o, z))| {
-                        if !edge(slot) {
+                        if !edge[slot] {
                             return;
                         }
                         let a = &moment[slot * m * m..(slot + 1) * m * m];
@@ -850,6 +857,7 @@ impl<const D: usize> VcCorrection<D> {
         fits(&zeta, &mut fit);
         self.fit = fit;
         self.frame = frame;
+        self.edge = edge;
         self.xi = zeta;
     }
 
@@ -863,15 +871,7 @@ impl<const D: usize> VcCorrection<D> {
     /// (`VC_REGULARISATION`).
     #[cfg(test)]
     pub fn at_edge(&self, nodes: &GridNodes<D>, n: usize) -> bool {
-        let m = self.m();
-        let reach = self
-            .moment
-            .iter()
-            .step_by(m * m)
-            .copied()
-            .fold(0.0, f64::max);
-        let slot = nodes.slot(n);
-        self.reduced[slot] || self.moment[slot * m * m] < VC_EDGE_REACH * reach
+        self.edge.get(nodes.slot(n)).copied().unwrap_or(false)
     }
 
     /// The correction `ζ_I·Q_I(x_p) − μ_p` to add to `∇Ψ_I(x_p)` for the node `n` (already
