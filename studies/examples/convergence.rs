@@ -7,7 +7,15 @@
 //! cargo run --release --example convergence            # the full study
 //! cargo run --release --example convergence -- --quick # coarser grids, for a look
 //! cargo run --release --example convergence -- --placed # only the particles off the Gauss points
+//! cargo run --release --example convergence -- --placed --budget 12           # in pieces: a fresh
+//! cargo run --release --example convergence -- --placed --budget 12 --resume  # start, then resume
 //! ```
+//!
+//! Each finished run of the off-Gauss study is kept in `docs/convergence/placed_runs.tsv`. With
+//! `--budget MINUTES` the study starts no new run once that many minutes have passed and says so;
+//! `--resume` keeps the runs already in the file (without it the file starts empty), so a study
+//! longer than one sitting runs as several commands, and the tables and plots are written when
+//! every run is in.
 //!
 //! The particles off the Gauss points (quarter points; jittered by ±30 %, three seeds; slip walls,
 //! and fixed walls on the low faces with slip walls on the high ones; 2D to 128 cells, 3D to 16)
@@ -20,8 +28,10 @@ use rkmpm_studies::verification::{
     fitted_slope, run_mms, run_mms_placed, AxisAlignedMms, ColumnRun, MmsRun, MmsWalls, Placement,
     SelfWeightColumn, Surface,
 };
+use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 struct Method {
     name: &'static str,
@@ -122,8 +132,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )
     .map_err(|_| "font")?;
 
-    placed_study(&out, quick)?;
-    if std::env::args().any(|a| a == "--placed") {
+    let args: Vec<String> = std::env::args().collect();
+    let budget = args
+        .iter()
+        .position(|a| a == "--budget")
+        .and_then(|i| args.get(i + 1))
+        .map(|m| m.parse::<f64>().map(|m| Duration::from_secs_f64(60.0 * m)))
+        .transpose()
+        .map_err(|_| "--budget takes a number of minutes")?;
+    let mut runs = RunCache::open(
+        out.join("placed_runs.tsv"),
+        args.iter().any(|a| a == "--resume"),
+        budget.map(|b| Instant::now() + b),
+    )?;
+    if !placed_study(&out, quick, &mut runs)? {
+        eprintln!(
+            "the budget is spent with {} runs in {}: run again with --resume",
+            runs.rows.len(),
+            runs.path.display()
+        );
+        return Ok(());
+    }
+    if args.iter().any(|a| a == "--placed") {
         return Ok(());
     }
     let mms = AxisAlignedMms::default();
@@ -524,7 +554,99 @@ fn draw_loglog(
 /// user who gives no boundary points gets), between slip walls and between fixed (low) and slip
 /// (high) walls: 2D to 128 cells, 3D to 16. Writes `placed.md`
 /// (tables, band over the seeds, slopes), `placed_l2.png` and `placed3d_l2.png`.
-fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error>> {
+/// One finished run of the off-Gauss study.
+#[derive(Debug, Clone, Copy)]
+struct Measured {
+    l2: f64,
+    energy: f64,
+    seconds: f64,
+}
+
+/// The off-Gauss study's finished runs, kept in a file so that the study can run in pieces.
+struct RunCache {
+    path: PathBuf,
+    /// The runs by [`RunCache::key`].
+    rows: HashMap<String, Measured>,
+    /// No new run starts after this.
+    deadline: Option<Instant>,
+}
+
+impl RunCache {
+    fn open(
+        path: PathBuf,
+        resume: bool,
+        deadline: Option<Instant>,
+    ) -> Result<Self, Box<dyn std::error::Error>> {
+        let mut rows = HashMap::new();
+        if resume && path.exists() {
+            for line in std::fs::read_to_string(&path)?.lines().skip(1) {
+                let f: Vec<&str> = line.split('\t').collect();
+                let bad = || format!("{}: bad line {line:?}", path.display());
+                if f.len() != 8 {
+                    return Err(bad().into());
+                }
+                let num = |i: usize| f[i].parse::<f64>().map_err(|_| bad());
+                let run = Measured {
+                    l2: num(5)?,
+                    energy: num(6)?,
+                    seconds: num(7)?,
+                };
+                rows.insert(f[..5].join("\t"), run);
+            }
+        } else {
+            std::fs::write(
+                &path,
+                "dim\tparticles\tmethod\tcells\tseed\tl2_error\tenergy_error\tseconds\n",
+            )?;
+        }
+        Ok(Self {
+            path,
+            rows,
+            deadline,
+        })
+    }
+
+    fn key(dim: usize, particles: &str, method: &str, cells: usize, seed: usize) -> String {
+        format!("{dim}\t{particles}\t{method}\t{cells}\t{seed}")
+    }
+
+    /// The run under `key`: from the file, or run now and added to it; `None` once the budget
+    /// is spent.
+    fn get(
+        &mut self,
+        key: String,
+        run: impl FnOnce() -> rkmpm::Result<MmsRun>,
+    ) -> Result<Option<Measured>, Box<dyn std::error::Error>> {
+        if let Some(&row) = self.rows.get(&key) {
+            return Ok(Some(row));
+        }
+        if self.deadline.is_some_and(|d| Instant::now() >= d) {
+            return Ok(None);
+        }
+        let r = run()?;
+        let row = Measured {
+            l2: r.errors.l2,
+            energy: r.errors.energy,
+            seconds: r.seconds,
+        };
+        let mut file = std::fs::OpenOptions::new().append(true).open(&self.path)?;
+        use std::io::Write as _;
+        writeln!(
+            file,
+            "{key}\t{:e}\t{:e}\t{:.1}",
+            row.l2, row.energy, row.seconds
+        )?;
+        self.rows.insert(key, row);
+        Ok(Some(row))
+    }
+}
+
+/// The study off the Gauss points; `false` when the budget ran out before every run was in.
+fn placed_study(
+    out: &Path,
+    quick: bool,
+    runs: &mut RunCache,
+) -> Result<bool, Box<dyn std::error::Error>> {
     let mut md = String::from("# Convergence off the Gauss points (manufactured solution)\n\n");
     writeln!(
         md,
@@ -549,19 +671,25 @@ fn placed_study(out: &Path, quick: bool) -> Result<(), Box<dyn std::error::Error
     let path = out.join("placed.md");
     let write =
         |md: &str| std::fs::write(&path, md).map_err(|e| format!("{}: {e}", path.display()));
-    placed_dimension::<2>(&mut md, out, grids2)?;
+    if !placed_dimension::<2>(&mut md, out, grids2, runs)? {
+        return Ok(false);
+    }
     write(&md)?;
-    placed_dimension::<3>(&mut md, out, grids3)?;
+    if !placed_dimension::<3>(&mut md, out, grids3, runs)? {
+        return Ok(false);
+    }
     write(&md)?;
-    Ok(())
+    Ok(true)
 }
 
-/// One dimension of [`placed_study`]: its table, slopes and plot.
+/// One dimension of [`placed_study`]: its table, slopes and plot; `false` when the budget ran
+/// out first (every run that fits is still made, and nothing is drawn).
 fn placed_dimension<const D: usize>(
     md: &mut String,
     out: &Path,
     grids: &[usize],
-) -> Result<(), Box<dyn std::error::Error>> {
+    runs: &mut RunCache,
+) -> Result<bool, Box<dyn std::error::Error>> {
     let rk1 = Shape::Rk {
         order: 1,
         support: 2.0,
@@ -605,6 +733,7 @@ fn placed_dimension<const D: usize>(
         "\n| particles | method | fitted L2 slope over the last three grids, each seed |\n|---|---|---|\n",
     );
     let mut series: Vec<Series> = Vec::new();
+    let mut complete = true;
     for (k, (pname, list, walls)) in placements.iter().enumerate() {
         let mms = AxisAlignedMms {
             walls: *walls,
@@ -616,26 +745,36 @@ fn placed_dimension<const D: usize>(
             for &cells in grids {
                 let mut errors = Vec::new();
                 for (s, &placement) in list.iter().enumerate() {
-                    let run = run_mms_placed::<D>(
-                        &mms,
-                        cells,
-                        2,
-                        placement,
-                        Surface::Found,
-                        shape,
-                        integration,
-                        Transfer::Apic,
-                        0.015,
-                        0.3,
-                    )?;
+                    let key = RunCache::key(D, pname, mname, cells, s + 1);
+                    let Some(run) = runs.get(key, || {
+                        run_mms_placed::<D>(
+                            &mms,
+                            cells,
+                            2,
+                            placement,
+                            Surface::Found,
+                            shape,
+                            integration,
+                            Transfer::Apic,
+                            0.015,
+                            0.3,
+                        )
+                    })?
+                    else {
+                        complete = false;
+                        continue;
+                    };
                     eprintln!(
                         "{D}D {pname}, {mname}, {cells} cells, #{s}: L2 {:.3e}  energy {:.3e}  {:.1} s",
-                        run.errors.l2, run.errors.energy, run.seconds
+                        run.l2, run.energy, run.seconds
                     );
-                    l2[s].push(run.errors.l2);
+                    l2[s].push(run.l2);
                     errors.push(run);
                 }
-                let band = |f: &dyn Fn(&MmsRun) -> f64| {
+                if !complete {
+                    continue;
+                }
+                let band = |f: &dyn Fn(&Measured) -> f64| {
                     let (lo, hi) = errors
                         .iter()
                         .map(f)
@@ -651,10 +790,13 @@ fn placed_dimension<const D: usize>(
                 writeln!(
                     md,
                     "| {pname} | {mname} | {cells} | {} | {} | {} |",
-                    band(&|r| r.errors.l2),
-                    band(&|r| r.errors.energy),
+                    band(&|r| r.l2),
+                    band(&|r| r.energy),
                     seconds.join(", ")
                 )?;
+            }
+            if !complete {
+                continue;
             }
             let h: Vec<f64> = grids.iter().map(|&c| 1.0 / c as f64).collect();
             let last = h.len().saturating_sub(3);
@@ -676,6 +818,9 @@ fn placed_dimension<const D: usize>(
             }
         }
     }
+    if !complete {
+        return Ok(false);
+    }
     md.push_str(&slopes);
     let png = if D == 2 {
         "placed_l2.png".to_string()
@@ -690,7 +835,8 @@ fn placed_dimension<const D: usize>(
         "L2 error",
         &out.join(png),
         true,
-    )
+    )?;
+    Ok(true)
 }
 
 /// The nearly incompressible column (ν = 0.49) with jittered particles: pressure against the exact
