@@ -85,7 +85,7 @@ pub(crate) mod step;
 
 pub use error::{Error, ErrorKind, Result};
 pub use grid::Grid;
-pub use integration::BoundaryPoints;
+pub use integration::{BoundaryPoints, VcSolve};
 pub use material::Material;
 pub use particles::{Field, Particles};
 pub use shape::{Shape, UniformRng};

@@ -91,12 +91,51 @@ use rayon::prelude::*;
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
 
-/// The conservative correction's solve stops when the preconditioned residual norm has fallen
-/// by this factor.
-pub(crate) const VC_SOLVE_TOLERANCE: f64 = 1e-12;
+/// The conservative correction's solve stops, by default, when the preconditioned residual norm
+/// has fallen by this factor ([`VcSolve`]).
+pub const VC_SOLVE_TOLERANCE: f64 = 1e-12;
 
-/// At most this many conjugate-gradient iterations per step.
-pub(crate) const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
+/// At most this many conjugate-gradient iterations per step, by default ([`VcSolve`]).
+pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
+
+/// The stopping rule of VC's conservative solve: conjugate gradients stop when the
+/// preconditioned residual norm has fallen to `tolerance` of the right-hand side's, or after
+/// `max_iterations`. Conservation does not depend on it: the corrected gradients sum to zero
+/// over a particle's nodes whatever the coefficients are; the divergence equalities are met to
+/// the tolerance. The default is the exact solve ([`VC_SOLVE_TOLERANCE`],
+/// [`VC_SOLVE_MAX_ITERATIONS`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VcSolve {
+    pub tolerance: f64,
+    pub max_iterations: usize,
+}
+
+impl Default for VcSolve {
+    fn default() -> Self {
+        VcSolve {
+            tolerance: VC_SOLVE_TOLERANCE,
+            max_iterations: VC_SOLVE_MAX_ITERATIONS,
+        }
+    }
+}
+
+impl VcSolve {
+    /// Refuses a tolerance outside `(0, 1]` (or not finite) and zero iterations.
+    pub fn check(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
+            return Err(Error::invalid(format!(
+                "the VC solve's tolerance must lie in (0, 1], got {}",
+                self.tolerance
+            )));
+        }
+        if self.max_iterations == 0 {
+            return Err(Error::invalid(
+                "the VC solve needs at least one iteration".to_string(),
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// At most this many restarts of the solve from its best iterate after a breakdown.
 pub(crate) const VC_SOLVE_MAX_RESTARTS: usize = 5;
@@ -194,6 +233,8 @@ pub struct VcCorrection<const D: usize> {
     /// At order 1, whether the correction subtracts the particles' linear fit (else their
     /// mean): [`crate::options::Shape::vc_linear_fit`].
     pub linear_fit: bool,
+    /// The solve's stopping rule.
+    pub solve: VcSolve,
     /// Conjugate-gradient iterations of the last solve.
     iterations: usize,
     /// Applies the order-1 system matrix-free, as orders ≥ 2 do (to test the assembled one).
@@ -226,6 +267,7 @@ impl<const D: usize> VcCorrection<D> {
             fit: Vec::new(),
             frame: Vec::new(),
             linear_fit: false,
+            solve: VcSolve::default(),
             iterations: 0,
             #[cfg(test)]
             matrix_free: false,
@@ -743,7 +785,7 @@ impl<const D: usize> VcCorrection<D> {
             });
         // Started from zero (a start from the last step's coefficients would save iterations
         // but tie the step to a history that a checkpoint does not hold), stopping when the
-        // preconditioned residual has fallen to `VC_SOLVE_TOLERANCE` of the right-hand side's.
+        // preconditioned residual has fallen to `solve.tolerance` of the right-hand side's.
         // Near a free surface the system is badly conditioned (nodes the particles barely
         // reach), and conjugate gradients can lose positive curvature to round-off (`dᵀKd ≤ 0`)
         // or let the residual grow: the solve then restarts from its best iterate with the
@@ -768,7 +810,11 @@ impl<const D: usize> VcCorrection<D> {
                 rz
             }
         };
-        let mut target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * size(&r, rz);
+        let VcSolve {
+            tolerance,
+            max_iterations,
+        } = self.solve;
+        let mut target = tolerance * tolerance * size(&r, rz);
         let mut current = size(&r, rz);
         let (mut best, mut best_rz) = (zeta.clone(), current);
         let (mut iterations, mut restarts) = (0, 0);
@@ -778,7 +824,7 @@ impl<const D: usize> VcCorrection<D> {
         let attained = |best: f64, target: f64| {
             m > 1 && best <= VC_SOLVE_ATTAINABLE * VC_SOLVE_ATTAINABLE * target
         };
-        while current > target && iterations < VC_SOLVE_MAX_ITERATIONS {
+        while current > target && iterations < max_iterations {
             apply(&d, &mut kd, &mut fit);
             let dkd = dot(&d, &kd);
             if dkd.is_nan() || dkd <= 0.0 {
@@ -800,7 +846,7 @@ impl<const D: usize> VcCorrection<D> {
                     // barely reach into the search directions, whose curvature round-off then
                     // swamps; the node blocks do not. Their norm measures from here on.
                     precondition(&rhs, &mut z);
-                    target = VC_SOLVE_TOLERANCE * VC_SOLVE_TOLERANCE * dot(&rhs, &z);
+                    target = tolerance * tolerance * dot(&rhs, &z);
                     precondition(&r, &mut z);
                     best_rz = dot(&r, &z);
                 }

@@ -145,6 +145,8 @@ pub struct Sim<const D: usize> {
     pub(crate) vc: Option<VcCorrection<D>>,
     /// Whether VC of order 1 subtracts the particles' linear fit ([`Sim::set_vc_linear_fit`]).
     vc_linear_fit: bool,
+    /// The stopping rule of VC's solve ([`Sim::set_vc_solve`]).
+    vc_solve: crate::VcSolve,
     pub(crate) time: f64,
     pub(crate) steps: u64,
     pub(crate) work: Workspace<D>,
@@ -179,6 +181,7 @@ impl<const D: usize> Sim<D> {
             surface: BoundaryPoints::default(),
             vc: None,
             vc_linear_fit: false,
+            vc_solve: crate::VcSolve::default(),
             time: 0.0,
             steps: 0,
             work: Workspace::default(),
@@ -284,6 +287,7 @@ impl<const D: usize> Sim<D> {
             Integration::Vc { order } => {
                 let mut vc = VcCorrection::new(order)?;
                 vc.linear_fit = self.vc_linear_fit && self.options.shape.vc_linear_fit();
+                vc.solve = self.vc_solve;
                 Some(vc)
             }
         };
@@ -309,6 +313,25 @@ impl<const D: usize> Sim<D> {
             vc.linear_fit = on && shape.vc_linear_fit();
         }
         Ok(())
+    }
+
+    /// The stopping rule of VC's conservative solve (default: the exact solve, to a residual of
+    /// 1e-12 of the right-hand side's; not kept by checkpoints). Linear and angular momentum
+    /// are conserved whatever the rule; a looser rule meets the divergence equalities less
+    /// exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
+    /// stopping rule"). Refuses a tolerance outside `(0, 1]` and zero iterations.
+    pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
+        solve.check()?;
+        self.vc_solve = solve;
+        if let Some(vc) = &mut self.vc {
+            vc.solve = solve;
+        }
+        Ok(())
+    }
+
+    /// The stopping rule of VC's solve ([`Sim::set_vc_solve`]).
+    pub fn vc_solve(&self) -> crate::VcSolve {
+        self.vc_solve
     }
 
     /// Chooses the velocity transfer. Before stepping only.

@@ -10,6 +10,7 @@
 //!   GRIDS      cells per side, comma-separated (16,32,64)
 //!   --mixed-walls  fixed walls on the low faces, slip walls on the high ones (slip everywhere
 //!                  without it)
+//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default 1e-12, 2000)
 //! ```
 //!
 //! Prints the relative L2 and energy-norm errors and the run time per grid, and the L2 slope.
@@ -74,8 +75,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     } else {
         MmsWalls::Slip
     };
+    let number = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .map(|v| {
+                v.parse::<f64>()
+                    .map_err(|_| format!("{name} takes a number"))
+            })
+            .transpose()
+    };
+    let default = rkmpm::VcSolve::default();
+    let vc_solve = rkmpm::VcSolve {
+        tolerance: number("--vc-tolerance")?.unwrap_or(default.tolerance),
+        max_iterations: number("--vc-iterations")?.map_or(default.max_iterations, |n| n as usize),
+    };
     let mms = AxisAlignedMms {
         walls,
+        vc_solve,
         ..AxisAlignedMms::default()
     };
     let mut l2 = Vec::new();
