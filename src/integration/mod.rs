@@ -92,18 +92,18 @@ use rayon::prelude::*;
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
 
 /// The conservative correction's solve stops, by default, when the preconditioned residual norm
-/// has fallen by this factor ([`VcSolve`]).
+/// has fallen by this factor (see `VcSolve`).
 pub const VC_SOLVE_TOLERANCE: f64 = 1e-12;
 
-/// At most this many conjugate-gradient iterations per step, by default ([`VcSolve`]).
+/// At most this many conjugate-gradient iterations per step, by default (see `VcSolve`).
 pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
 
 /// The stopping rule of VC's conservative solve: conjugate gradients stop when the
 /// preconditioned residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`. Conservation does not depend on it: the corrected gradients sum to zero
 /// over a particle's nodes whatever the coefficients are; the divergence equalities are met to
-/// the tolerance. The default is the exact solve ([`VC_SOLVE_TOLERANCE`],
-/// [`VC_SOLVE_MAX_ITERATIONS`]).
+/// the tolerance. The default is the exact solve: 1e-12 and 2000 iterations
+/// (`VC_SOLVE_TOLERANCE`, `VC_SOLVE_MAX_ITERATIONS`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VcSolve {
     pub tolerance: f64,
