@@ -36,6 +36,16 @@
 #define RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE 1000000000
 
 /**
+ * The tolerance of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
+ */
+#define RKMPM_DEFAULT_VC_SOLVE_TOLERANCE 1e-12
+
+/**
+ * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
+ */
+#define RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS 2000
+
+/**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
  * failure, and `rkmpm_last_error_message` gives the details of the last failure on this thread.
  */
@@ -850,6 +860,35 @@ enum RkmpmStatus rkmpm_sim_set_max_steps_per_advance(struct RkmpmSim *sim, uint6
  */
 enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
                                                  uint64_t *out_max_steps);
+
+/**
+ * Sets the stopping rule of VC's conservative solve (`RKMPM_INTEGRATION_VC`): conjugate
+ * gradients stop when the preconditioned residual has fallen to `tolerance` (in (0, 1]) of the
+ * right-hand side's, or after `max_iterations` (>= 1). Default
+ * `RKMPM_DEFAULT_VC_SOLVE_TOLERANCE` (1e-12, the exact solve: the divergence equalities to
+ * round-off) and `RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS` (2000). 1e-4 keeps the convergence
+ * study's errors within 0.2 % at a quarter of the cost of an RK2 + VC2 step, but breaks mirror
+ * symmetry at 1e-6 with VC2 and made the VC granular collapse invert a particle
+ * (docs/convergence/FINDINGS.md). Linear and angular momentum are conserved whatever the rule. May change between
+ * steps; part of a checkpoint. A refused rule changes nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
+                                        double tolerance,
+                                        uint64_t max_iterations);
+
+/**
+ * Writes the stopping rule of VC's solve (`rkmpm_sim_set_vc_solve`) to `*out_tolerance` and
+ * `*out_max_iterations`; neither is written unless both pointers are valid.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_tolerance` and `out_max_iterations` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_vc_solve(const struct RkmpmSim *sim,
+                                    double *out_tolerance,
+                                    uint64_t *out_max_iterations);
 
 /**
  * Writes the kinetic, stored and gravitational energies of the particles to `*out`.

@@ -43,6 +43,9 @@ module rkmpm
    ! The bound on the steps of one advance of a new (or loaded) simulation
    ! (sim%set_max_steps_per_advance changes it).
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE = 1000000000
+   ! The stopping rule of VC's solve in a new simulation (sim%set_vc_solve changes it).
+   real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-12_c_double
+   integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
 
    ! enum RkmpmStatus (a C enum: int-sized)
    integer(c_int), parameter, public :: RKMPM_OK = 0
@@ -223,6 +226,8 @@ module rkmpm
       procedure :: advance => sim_advance
       procedure :: set_max_steps_per_advance => sim_set_max_steps_per_advance
       procedure :: max_steps_per_advance => sim_max_steps_per_advance
+      procedure :: set_vc_solve => sim_set_vc_solve
+      procedure :: vc_solve => sim_vc_solve
       procedure :: time => sim_time
       procedure :: energies => sim_energies
       procedure :: momenta => sim_momenta
@@ -545,6 +550,26 @@ module rkmpm
          type(c_ptr), value :: sim
          integer(c_int64_t), intent(out) :: out_max_steps
       end function rkmpm_sim_max_steps_per_advance
+
+      ! enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim, double tolerance,
+      !                                         uint64_t max_iterations);
+      integer(c_int) function rkmpm_sim_set_vc_solve(sim, tolerance, max_iterations) &
+            bind(C, name="rkmpm_sim_set_vc_solve")
+         import :: c_int, c_ptr, c_double, c_int64_t
+         type(c_ptr), value :: sim
+         real(c_double), value :: tolerance
+         integer(c_int64_t), value :: max_iterations
+      end function rkmpm_sim_set_vc_solve
+
+      ! enum RkmpmStatus rkmpm_sim_vc_solve(const struct RkmpmSim *sim, double *out_tolerance,
+      !                                     uint64_t *out_max_iterations);
+      integer(c_int) function rkmpm_sim_vc_solve(sim, out_tolerance, out_max_iterations) &
+            bind(C, name="rkmpm_sim_vc_solve")
+         import :: c_int, c_ptr, c_double, c_int64_t
+         type(c_ptr), value :: sim
+         real(c_double), intent(out) :: out_tolerance
+         integer(c_int64_t), intent(out) :: out_max_iterations
+      end function rkmpm_sim_vc_solve
 
       ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
       integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
@@ -1301,6 +1326,35 @@ contains
       if (present(errmsg)) errmsg = text
       sim_max_steps_per_advance = n
    end function sim_max_steps_per_advance
+
+   !> The stopping rule of VC's solve: tolerance in (0, 1] of the right-hand side's residual
+   !> (default 1e-12, the exact solve), at most max_iterations (>= 1) iterations.
+   subroutine sim_set_vc_solve(self, tolerance, max_iterations, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      real(c_double), intent(in) :: tolerance
+      integer(c_int64_t), intent(in) :: max_iterations
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      ! C takes an unsigned count: a negative one is passed as 0, which C refuses.
+      call report(rkmpm_sim_set_vc_solve(self%h, tolerance, max(max_iterations, 0_c_int64_t)), &
+         'set_vc_solve', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_vc_solve
+
+   !> The stopping rule of VC's solve (sim%set_vc_solve).
+   subroutine sim_vc_solve(self, tolerance, max_iterations, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      real(c_double), intent(out) :: tolerance
+      integer(c_int64_t), intent(out) :: max_iterations
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      tolerance = 0
+      max_iterations = 0
+      call report(rkmpm_sim_vc_solve(self%h, tolerance, max_iterations), 'vc_solve', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_vc_solve
 
    !> The energies of the particles now.
    type(rkmpm_energies) function sim_energies(self, stat, errmsg)

@@ -947,6 +947,59 @@ static void lifetime_rows(void) {
     CALL(f.sim, rkmpm_sim_max_steps_per_advance(f.sim, misaligned(raw)));
     drop(&f);
   }
+  ROW("set_vc_solve.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_vc_solve(NULL, 1e-6, 10));
+  }
+  ROW("set_vc_solve.bad_tolerance", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_vc_solve(f.sim, 1e-6, 10));
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, 0.0, 10));
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, -1e-4, 10));
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, 1.5, 10));
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, NAN, 10));
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, INFINITY, 10));
+    double tolerance = 0.0;
+    uint64_t iterations = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_solve(f.sim, &tolerance, &iterations));
+    EXPECT(tolerance == 1e-6 && iterations == 10, "the rule is %g, %llu", tolerance,
+           (unsigned long long)iterations);
+    drop(&f);
+  }
+  ROW("set_vc_solve.zero_iterations", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_set_vc_solve(f.sim, 1e-6, 0));
+    double tolerance = 0.0;
+    uint64_t iterations = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_solve(f.sim, &tolerance, &iterations));
+    EXPECT(tolerance == RKMPM_DEFAULT_VC_SOLVE_TOLERANCE &&
+               iterations == RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS,
+           "the rule is %g, %llu", tolerance, (unsigned long long)iterations);
+    drop(&f);
+  }
+  ROW("vc_solve.null_sim", RKMPM_ERR_NULL_POINTER) {
+    double tolerance = 7.0;
+    uint64_t iterations = 77;
+    CALL(NULL, rkmpm_sim_vc_solve(NULL, &tolerance, &iterations));
+    EXPECT(tolerance == 7.0 && iterations == 77, "wrote the output after a failure");
+  }
+  ROW("vc_solve.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = block(2);
+    double tolerance = 7.0;
+    uint64_t iterations = 77;
+    CALL(f.sim, rkmpm_sim_vc_solve(f.sim, NULL, &iterations));
+    CALL(f.sim, rkmpm_sim_vc_solve(f.sim, &tolerance, NULL));
+    EXPECT(tolerance == 7.0 && iterations == 77, "wrote one output after a failure");
+    drop(&f);
+  }
+  ROW("vc_solve.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    double tolerance = 7.0;
+    uint64_t iterations = 77;
+    CALL(f.sim, rkmpm_sim_vc_solve(f.sim, misaligned(raw), &iterations));
+    CALL(f.sim, rkmpm_sim_vc_solve(f.sim, &tolerance, misaligned(raw)));
+    EXPECT(tolerance == 7.0 && iterations == 77, "wrote one output after a failure");
+    drop(&f);
+  }
 }
 
 static void option_rows(void) {

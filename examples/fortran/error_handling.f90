@@ -104,7 +104,8 @@ program error_handling
    real(c_double), allocatable :: wrong(:, :)
    integer :: i, j, p
    integer(c_size_t) :: n0
-   integer(c_int64_t) :: steps0, taken
+   integer(c_int64_t) :: steps0, taken, iterations
+   real(c_double) :: tolerance
    type(force_data), target :: force
    type(progress_data), target :: watch
    character(len=64) :: names(0:13)
@@ -176,6 +177,18 @@ program error_handling
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'RK order 2 with a support too small')
    call sim%set_integration(RKMPM_INTEGRATION_VC, vc_order=0, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'VC order 0')
+   call sim%vc_solve(tolerance, iterations, stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'VC solve rule')
+   call expect_true(tolerance == RKMPM_DEFAULT_VC_SOLVE_TOLERANCE .and. &
+                    iterations == RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS, 'default VC solve rule')
+   call sim%set_vc_solve(2.0_c_double, 10_c_int64_t, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'VC solve tolerance 2')
+   call sim%set_vc_solve(1.0e-8_c_double, -1_c_int64_t, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'VC solve with -1 iterations')
+   call sim%set_vc_solve(1.0e-8_c_double, 100_c_int64_t, stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'VC solve 1e-8, 100 iterations')
+   call sim%vc_solve(tolerance, iterations, stat=st, errmsg=msg)
+   call expect_true(tolerance == 1.0e-8_c_double .and. iterations == 100, 'VC solve rule kept')
    call sim%set_transfer(RKMPM_TRANSFER_PIC_FLIP, flip_ratio=1.5_c_double, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'FLIP ratio 1.5')
    call sim%set_scheme(RKMPM_SCHEME_MUSL, stat=st, errmsg=msg)

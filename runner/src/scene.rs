@@ -93,6 +93,13 @@ pub struct OptionsSpec {
     /// VC only: the order of the divergence equalities (default 1).
     #[serde(default)]
     pub vc_order: Option<u32>,
+    /// VC only: the solve's tolerance, in (0, 1] of the right-hand side's residual (default
+    /// the engine's, 1e-12, the exact solve).
+    #[serde(default)]
+    pub vc_tolerance: Option<f64>,
+    /// VC only: the solve's iteration bound (default the engine's, 2000).
+    #[serde(default)]
+    pub vc_max_iterations: Option<usize>,
     #[serde(default)]
     pub transfer: TransferKind,
     /// PIC/FLIP only: the FLIP fraction of the blend (default 0).
@@ -124,6 +131,15 @@ impl OptionsSpec {
         Transfer::from_kind(self.transfer, self.flip.unwrap_or(0.0))
     }
 
+    /// The VC solve's stopping rule: the engine's default where a key is not given.
+    pub fn vc_solve(&self) -> rkmpm::VcSolve {
+        let default = rkmpm::VcSolve::DEFAULT;
+        rkmpm::VcSolve {
+            tolerance: self.vc_tolerance.unwrap_or(default.tolerance),
+            max_iterations: self.vc_max_iterations.unwrap_or(default.max_iterations),
+        }
+    }
+
     /// Refuses values out of range and settings that would do nothing in this scene, naming
     /// the key as the scene writes it (`table` is `options` or `compare`).
     pub fn check(&self, table: &str) -> Result<()> {
@@ -145,11 +161,16 @@ impl OptionsSpec {
                 }
             }
         }
-        if self.integration != IntegrationKind::Vc && self.vc_order.is_some() {
-            return unused(
-                "vc_order",
-                "it sets VC integration, and integration is not \"vc\"",
-            );
+        if self.integration != IntegrationKind::Vc {
+            for (key, given) in [
+                ("vc_order", self.vc_order.is_some()),
+                ("vc_tolerance", self.vc_tolerance.is_some()),
+                ("vc_max_iterations", self.vc_max_iterations.is_some()),
+            ] {
+                if given {
+                    return unused(key, "it sets VC integration, and integration is not \"vc\"");
+                }
+            }
         }
         if let Some(flip) = self.flip {
             if self.transfer != TransferKind::PicFlip {
@@ -450,6 +471,7 @@ impl Scene {
         sim.set_shape(o.shape()).map_err(context(table))?;
         sim.set_integration(o.integration())
             .map_err(context(table))?;
+        sim.set_vc_solve(o.vc_solve()).map_err(context(table))?;
         sim.set_transfer(o.transfer()).map_err(context(table))?;
         sim.set_scheme(o.scheme).map_err(context(table))?;
         if let Some(g) = &o.gravity {
@@ -995,6 +1017,39 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.message.contains("quartic"), "{}", e.message);
+    }
+
+    /// `options.vc_tolerance` and `vc_max_iterations` set the VC solve's rule (the engine's
+    /// default without them); refused without VC and out of range.
+    #[test]
+    fn the_vc_solve_keys_set_the_rule() {
+        let disks = BUNDLED[0].1;
+        let rule = |text: &str| match Scene::from_toml(text, "x").and_then(|s| s.build()) {
+            Ok(SceneSim::D2(sim)) => Ok(sim.vc_solve()),
+            Ok(SceneSim::D3(_)) => unreachable!("disks is 2D"),
+            Err(e) => Err(e.message),
+        };
+        assert_eq!(rule(disks), Ok(rkmpm::VcSolve::DEFAULT));
+        let with =
+            |extra: &str| disks.replacen("vc_order = 1\n", &format!("vc_order = 1\n{extra}\n"), 1);
+        assert_eq!(
+            rule(&with("vc_tolerance = 1e-12\nvc_max_iterations = 50")),
+            Ok(rkmpm::VcSolve {
+                tolerance: 1e-12,
+                max_iterations: 50
+            })
+        );
+        let e = rule(&with("vc_tolerance = 1.5")).unwrap_err();
+        assert!(e.contains("options: the VC solve's tolerance"), "{e}");
+        let e = rule(&with("vc_max_iterations = 0")).unwrap_err();
+        assert!(e.contains("at least one iteration"), "{e}");
+        let bar = BUNDLED[1].1.replacen(
+            "transfer = \"apic\"\n",
+            "transfer = \"apic\"\nvc_tolerance = 1e-6\n",
+            1,
+        );
+        let e = rule(&bar).unwrap_err();
+        assert!(e.contains("options.vc_tolerance does nothing here"), "{e}");
     }
 
     /// `run.max_steps` bounds the run: a scene whose estimate exceeds it is refused before the

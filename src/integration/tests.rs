@@ -29,6 +29,8 @@ fn jittered_box_on<const D: usize>(
     if let Some(order) = order {
         sim.set_integration(Integration::Vc { order }).unwrap();
     }
+    // The equalities are checked to round-off: the exact solve.
+    sim.set_vc_solve(VcSolve::EXACT).unwrap();
     let m = sim.add_material(Material::linear_elastic(1000.0, 1e6, 0.25).unwrap());
     let s = h / 2.0;
     let n = cells * 4 / 5;
@@ -94,6 +96,7 @@ fn correction<const D: usize>(
 ) -> VcCorrection<D> {
     let work = &mut sim.work;
     let mut vc = VcCorrection::<D>::new(order).unwrap();
+    vc.solve = VcSolve::EXACT;
     vc.linear_fit = sim.vc.as_ref().is_some_and(|vc| vc.linear_fit);
     vc.matrix_free = solve == Solve::MatrixFree;
     vc.multilevel = solve == Solve::Multilevel;

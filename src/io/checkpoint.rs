@@ -35,8 +35,10 @@ const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// Format version written by this build. Version 2 adds the particles' ids (their storage is
 /// sorted by grid block); version 1 files, written before, load with the particles in id order.
 /// Version 3 adds the energy ledger (`Sim::set_energy_accounting`) after the step count;
-/// older files load with the accounting off.
-pub const CHECKPOINT_VERSION: u32 = 3;
+/// older files load with the accounting off. Version 4 adds the VC solve's stopping rule
+/// (`Sim::set_vc_solve`) at the end; older files, written when the exact solve was the default,
+/// load with `VcSolve::EXACT`.
+pub const CHECKPOINT_VERSION: u32 = 4;
 
 fn corrupt(what: impl Into<String>) -> Error {
     Error::new(ErrorKind::CorruptFile, what)
@@ -451,7 +453,7 @@ impl<const D: usize> Sim<D> {
         self.encode(CHECKPOINT_VERSION)
     }
 
-    /// The checkpoint in format `version` (1 to 3; tests write older versions to read them
+    /// The checkpoint in format `version` (1 to 4; tests write older versions to read them
     /// back).
     fn encode(&self, version: u32) -> Vec<u8> {
         let mut w = Writer::default();
@@ -486,6 +488,10 @@ impl<const D: usize> Sim<D> {
                 ]
                 .iter(),
             );
+        }
+        if version >= 4 {
+            w.f64(self.vc_solve().tolerance);
+            w.u64(self.vc_solve().max_iterations as u64);
         }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
@@ -620,6 +626,16 @@ impl<const D: usize> Sim<D> {
                 contact: r.f64()?,
             };
         }
+        let solve = if version >= 4 {
+            crate::VcSolve {
+                tolerance: r.f64()?,
+                max_iterations: usize::try_from(r.u64()?)
+                    .map_err(|_| corrupt("VC solve iteration count too large"))?,
+            }
+        } else {
+            crate::VcSolve::EXACT
+        };
+        sim.set_vc_solve(solve)?;
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
         }
@@ -725,14 +741,41 @@ mod tests {
         assert_eq!(old.particles, sim.particles);
         // A flag other than 0 or 1 is refused.
         let mut bytes = sim.checkpoint_bytes();
-        let flag = bytes.len() - 4 - 6 * 8 - 4;
+        let flag = bytes.len() - 4 - 16 - 6 * 8 - 4;
         bytes[flag] = 2;
+        refused_as_corrupt(&mut bytes, "energy accounting flag 2");
+    }
+
+    /// Format 4 keeps the VC solve's stopping rule; a format-3 file, written when the exact
+    /// solve was the default, loads with it.
+    #[test]
+    fn the_vc_solve_rule_is_kept_from_format_4() {
+        let mut sim = block();
+        let rule = crate::VcSolve {
+            tolerance: 1e-6,
+            max_iterations: 7,
+        };
+        sim.set_vc_solve(rule).unwrap();
+        let copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert_eq!(copy.vc_solve(), rule);
+        let old = Sim::<2>::from_checkpoint_bytes(&sim.encode(3)).unwrap();
+        assert_eq!(old.vc_solve(), crate::VcSolve::EXACT);
+        // A tolerance the engine refuses is a damaged file.
+        let mut bytes = sim.checkpoint_bytes();
+        let tolerance = bytes.len() - 4 - 16;
+        bytes[tolerance..tolerance + 8].copy_from_slice(&2.0f64.to_le_bytes());
+        refused_as_corrupt(&mut bytes, "tolerance");
+    }
+
+    /// A checkpoint edited in its payload, its checksum made right again, is refused as a
+    /// damaged file with a message containing `what`.
+    fn refused_as_corrupt(bytes: &mut [u8], what: &str) {
         let n = bytes.len();
         let crc = crc32fast::hash(&bytes[24..n - 4]).to_le_bytes();
         bytes[n - 4..].copy_from_slice(&crc);
-        let e = Sim::<2>::from_checkpoint_bytes(&bytes).err().unwrap();
+        let e = Sim::<2>::from_checkpoint_bytes(bytes).err().unwrap();
         assert_eq!(e.kind, ErrorKind::CorruptFile, "{e}");
-        assert!(e.message.contains("energy accounting flag 2"), "{e}");
+        assert!(e.message.contains(what), "{e}");
     }
 
     #[test]

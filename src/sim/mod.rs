@@ -316,9 +316,9 @@ impl<const D: usize> Sim<D> {
     }
 
     /// The stopping rule of VC's conservative solve (default: the exact solve, to a residual of
-    /// 1e-12 of the right-hand side's; not kept by checkpoints). Linear and angular momentum
-    /// are conserved whatever the rule; a looser rule meets the divergence equalities less
-    /// exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
+    /// 1e-12 of the right-hand side's, [`crate::VcSolve::EXACT`]; kept by checkpoints). Linear
+    /// and angular momentum are conserved whatever the rule; a looser rule meets the divergence
+    /// equalities less exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
     /// stopping rule"). Refuses a tolerance outside `(0, 1]` and zero iterations.
     pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
         solve.check()?;

@@ -10,7 +10,7 @@
 //!   GRIDS      cells per side, comma-separated (16,32,64)
 //!   --mixed-walls  fixed walls on the low faces, slip walls on the high ones (slip everywhere
 //!                  without it)
-//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default 1e-12, 2000)
+//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default the engine's: 1e-12, 2000)
 //! ```
 //!
 //! Prints the relative L2 and energy-norm errors and the run time per grid, and the L2 slope.

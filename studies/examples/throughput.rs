@@ -10,7 +10,8 @@
 //! ```
 //!
 //! Options: `--dim 2|3`, `--method linear|bspline2|bspline3|rk1|rk2`, `--vc` (VC integration of
-//! order 1, order 2 for rk2), `--particles N` (rounded to m^D with m even), `--steps S` (timed
+//! order 1, order 2 for rk2), `--vc-tolerance T` (the VC solve's tolerance, `rkmpm::VcSolve`;
+//! default the engine's), `--particles N` (rounded to m^D with m even), `--steps S` (timed
 //! steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
 //! `--header` (print the CSV header first), `--phases` (time per phase on stderr),
@@ -56,6 +57,7 @@ struct Args {
     dim: usize,
     method: String,
     vc: bool,
+    vc_tolerance: Option<f64>,
     particles: usize,
     steps: usize,
     warmup: usize,
@@ -80,6 +82,7 @@ fn parse() -> Result<Args, String> {
         dim: 2,
         method: "bspline2".into(),
         vc: false,
+        vc_tolerance: None,
         particles: 65536,
         steps: 50,
         warmup: 2,
@@ -105,6 +108,9 @@ fn parse() -> Result<Args, String> {
             "--dim" => a.dim = val()?.parse().map_err(|e| format!("--dim: {e}"))?,
             "--method" => a.method = val()?,
             "--vc" => a.vc = true,
+            "--vc-tolerance" => {
+                a.vc_tolerance = Some(val()?.parse().map_err(|e| format!("--vc-tolerance: {e}"))?)
+            }
             "--particles" => {
                 a.particles = val()?.parse().map_err(|e| format!("--particles: {e}"))?
             }
@@ -131,7 +137,7 @@ fn parse() -> Result<Args, String> {
             "-h" | "--help" => {
                 return Err(
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
-                     [--vc] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
+                     [--vc] [--vc-tolerance T] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
                      [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--energy] [--vtk DIR]"
@@ -203,6 +209,13 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     if a.vc {
         sim.set_integration(Integration::Vc { order: vc_order })
             .map_err(e)?;
+        if let Some(tolerance) = a.vc_tolerance {
+            let solve = rkmpm::VcSolve {
+                tolerance,
+                ..sim.vc_solve()
+            };
+            sim.set_vc_solve(solve).map_err(e)?;
+        }
     }
     let material = match a.material.as_str() {
         "neo-hookean" => Material::neo_hookean(DENSITY, YOUNG, POISSON),

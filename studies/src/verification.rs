@@ -29,7 +29,7 @@ pub struct AxisAlignedMms {
     pub poisson: f64,
     pub density: f64,
     pub walls: MmsWalls,
-    /// The stopping rule of VC's solve in the runs ([`rkmpm::VcSolve`]; default the exact one).
+    /// The stopping rule of VC's solve in the runs ([`rkmpm::VcSolve`]; default the engine's).
     pub vc_solve: rkmpm::VcSolve,
 }
 

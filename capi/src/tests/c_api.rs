@@ -943,6 +943,51 @@ fn checkpoint_through_the_c_api() {
     }
 }
 
+/// The VC solve's stopping rule: the default, a refused rule that changes nothing, and a
+/// checkpoint that keeps the rule.
+#[test]
+fn vc_solve_rule_through_the_c_api() {
+    let dir = std::env::temp_dir().join(format!("rkmpm-c-vc-solve-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = std::ffi::CString::new(dir.join("a.rkmpm").to_str().unwrap()).unwrap();
+    let sim = sim2d(false);
+    unsafe {
+        let rule = |s: *const RkmpmSim| {
+            let (mut tolerance, mut iterations) = (0.0, 0u64);
+            assert_eq!(
+                rkmpm_sim_vc_solve(s, &mut tolerance, &mut iterations),
+                RKMPM_OK
+            );
+            (tolerance, iterations)
+        };
+        assert_eq!(
+            rule(sim),
+            (
+                RKMPM_DEFAULT_VC_SOLVE_TOLERANCE,
+                RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS
+            )
+        );
+        assert_eq!(rule(sim), (1e-12, 2000));
+        for (tolerance, iterations) in [(0.0, 5), (f64::NAN, 5), (2.0, 5), (1e-6, 0)] {
+            assert_eq!(
+                rkmpm_sim_set_vc_solve(sim, tolerance, iterations),
+                RKMPM_ERR_INVALID_ARGUMENT
+            );
+            let message = last_error();
+            assert!(message.starts_with("rkmpm_sim_set_vc_solve: "), "{message}");
+        }
+        assert_eq!(rule(sim), (1e-12, 2000));
+        assert_eq!(rkmpm_sim_set_vc_solve(sim, 1e-4, 50), RKMPM_OK);
+        assert_eq!(rkmpm_sim_save(sim, path.as_ptr()), RKMPM_OK);
+        let mut copy = null_mut();
+        assert_eq!(rkmpm_sim_load(path.as_ptr(), &mut copy), RKMPM_OK);
+        assert_eq!(rule(copy), (1e-4, 50));
+        rkmpm_sim_free(copy);
+        rkmpm_sim_free(sim);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Separate simulations on separate threads at once give the same results as one after another.
 #[test]
 fn separate_simulations_run_on_separate_threads() {

@@ -97,6 +97,7 @@ enum Call {
     /// `rkmpm_sim_advance` with this duration and cfl as they are (the whole-range target).
     AdvanceBy(f64, f64),
     SetMaxSteps(u64),
+    SetVcSolve(f64, u64),
     StableDt(f64),
     Read {
         field: u32,
@@ -168,6 +169,8 @@ fn call_with_any_double() -> impl Strategy<Value = Call> {
         4 => (any_double(), prop_oneof![3 => 0.05f64..1.0, 1 => any_double()])
             .prop_map(|(d, c)| Call::AdvanceBy(d, c)),
         1 => prop_oneof![Just(0u64), Just(1), 1..=FUZZ_MAX_STEPS].prop_map(Call::SetMaxSteps),
+        1 => (prop_oneof![1e-12f64..1.0, any_double()], 0u64..50)
+            .prop_map(|(t, n)| Call::SetVcSolve(t, n)),
     ];
     prop_oneof![6 => call(), 4 => wide]
 }
@@ -284,6 +287,7 @@ unsafe fn apply(sim: *mut RkmpmSim, dim: usize, c: &Call) -> RkmpmStatus {
             rkmpm_sim_advance(sim, *duration, *cfl, &mut steps)
         }
         Call::SetMaxSteps(n) => rkmpm_sim_set_max_steps_per_advance(sim, *n),
+        Call::SetVcSolve(t, n) => rkmpm_sim_set_vc_solve(sim, *t, *n),
         Call::StableDt(cfl) => {
             let mut dt = 0.0;
             rkmpm_sim_stable_dt(sim, *cfl, &mut dt)

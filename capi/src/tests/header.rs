@@ -37,8 +37,9 @@ fn committed_header_is_up_to_date() {
 }
 
 /// The `RKMPM_*` integer constants of a text: `#define NAME VALUE` and enum lines `NAME = VALUE,`
-/// of the C header, or `integer(...), parameter, public :: NAME = VALUE` of the Fortran module.
-fn constants(text: &str) -> std::collections::BTreeMap<String, i64> {
+/// of the C header, or `integer(...), parameter, public :: NAME = VALUE` of the Fortran module;
+/// real constants too (`1.0e-4_c_double` in Fortran).
+fn constants(text: &str) -> std::collections::BTreeMap<String, f64> {
     let mut out = std::collections::BTreeMap::new();
     for line in text.lines() {
         let line = line.trim();
@@ -50,7 +51,8 @@ fn constants(text: &str) -> std::collections::BTreeMap<String, i64> {
         let line = line.split('!').next().unwrap().trim().trim_end_matches(',');
         let mut words = line.split([' ', '=']).filter(|w| !w.is_empty());
         if let (Some(name), Some(value), None) = (words.next(), words.next(), words.next()) {
-            if let (true, Ok(v)) = (name.starts_with("RKMPM_"), value.parse::<i64>()) {
+            let value = value.trim_end_matches("_c_double");
+            if let (true, Ok(v)) = (name.starts_with("RKMPM_"), value.parse::<f64>()) {
                 assert!(out.insert(name.to_string(), v).is_none(), "{name} twice");
             }
         }
@@ -118,7 +120,7 @@ fn c_codes_cover_every_kind() {
         let mut codes: Vec<i64> = c
             .iter()
             .filter(|(n, _)| n.starts_with(prefix))
-            .map(|(_, &v)| v)
+            .map(|(_, &v)| v as i64)
             .collect();
         codes.sort();
         let n = codes.len() as u32;
