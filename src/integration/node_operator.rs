@@ -472,12 +472,8 @@ pub(crate) struct Multilevel<const D: usize> {
     reduced: Vec<bool>,
     /// The operators, finest first.
     levels: Vec<NodeOperator<D>>,
-    /// Per level but the coarsest: each row's aggregate on the next level (`u32::MAX` for a
-    /// row without particles, which takes no part).
-    parent: Vec<Vec<u32>>,
-    /// Per child position in an aggregate (bit `a` set: the upper node along axis `a`), `P`'s
-    /// `m × m` block: row `e` a node's polynomial, column `f` the aggregate's.
-    prolongation: Vec<Vec<f64>>,
+    /// Per level but the coarsest: how its rows make the next level's.
+    aggregation: Vec<Aggregation>,
     /// The coarsest level's dense factor (its rows regularised by `1e-10` of their diagonal:
     /// `K` is singular along the polynomials of degree < n over every body).
     coarsest: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
@@ -516,37 +512,197 @@ fn re_expansion<const D: usize>(exponents: &[[u32; D]], d: [f64; D], s: f64) -> 
     out
 }
 
+/// Aggregates along a row of `n` lattice nodes (each node's aggregate, numbered from the low
+/// end), their own mirror image about the row's centre: pairs of neighbours, and of an odd
+/// count the middle node with its two neighbours, and where the count on each side of those
+/// three is odd, the three nodes at each end together. A body symmetric about a node plane then
+/// gets a symmetric V-cycle: pairs counted from one end (`k div 2`) put the plane's node with
+/// one of its neighbours, and a solve stopped at 1e-4 left the drop of
+/// `tests/vc_conservation.rs` 3.5e-6 off symmetry (5.5e-13 with these). Used at order ≥ 2
+/// (RK2 + VC2 on the throughput example's 2D block: 93 iterations a step against 90 with pairs
+/// from one end). At order 1 with the mean fit they took 17 iterations a step where pairs from
+/// one end take 12 (2D `bspline2` + VC1, 10^5 particles, 161 nodes across; 16–17 with coarse
+/// weights 1.6 to 2, 17 with the middle node alone), so order 1 keeps pairs counted from one end.
+fn mirrored_pairs(n: usize) -> Vec<usize> {
+    if n.is_multiple_of(2) {
+        return (0..n).map(|t| t / 2).collect();
+    }
+    // The nodes below the middle three.
+    let side = (n / 2).saturating_sub(1);
+    if side == 1 {
+        return vec![0; n];
+    }
+    let low = |t: usize| match side % 2 {
+        0 => t / 2,
+        _ => t.saturating_sub(1) / 2,
+    };
+    let below = side / 2;
+    (0..n)
+        .map(|t| {
+            if t < side {
+                low(t)
+            } else if t < side + 3 {
+                below
+            } else {
+                2 * below - low(n - 1 - t)
+            }
+        })
+        .collect()
+}
+
+/// A level's rows' positions along each axis, in nodes of the fine grid: `position[a][t]` is
+/// that of the rows whose multi-index along `a` is `lowest[a] + t`.
+struct Lattice<const D: usize> {
+    lowest: [i64; D],
+    position: [Vec<f64>; D],
+}
+
+impl<const D: usize> Lattice<D> {
+    /// The fine level's: its nodes, over the box of those with particles.
+    fn of_nodes(fine: &NodeOperator<D>) -> Self {
+        let mm = fine.m * fine.m;
+        let active = || (0..fine.rows()).filter(|&i| fine.diagonal[i * mm] > 0.0);
+        let lowest = std::array::from_fn(|a| active().map(|i| fine.index[i][a]).min().unwrap_or(0));
+        let highest: [i64; D] =
+            std::array::from_fn(|a| active().map(|i| fine.index[i][a]).max().unwrap_or(-1));
+        Lattice {
+            lowest,
+            position: std::array::from_fn(|a| (lowest[a]..=highest[a]).map(|k| k as f64).collect()),
+        }
+    }
+}
+
+/// A level's aggregates along one axis: each of its nodes' aggregate (numbered from `lowest`),
+/// its offset from the aggregate's centre in the next level's spacing, and the aggregates'
+/// centres.
+struct AxisAggregates {
+    aggregate: Vec<usize>,
+    offset: Vec<f64>,
+    centre: Vec<f64>,
+    lowest: i64,
+}
+
+/// How a level's rows make the next level's: each row's aggregate (`u32::MAX` for a row
+/// without particles, which takes no part) and `P`'s block.
+struct Aggregation {
+    parent: Vec<u32>,
+    /// Per row: which of `prolongation`'s blocks is its.
+    child: Vec<u16>,
+    /// Per offset of a row from its aggregate's centre, `P`'s `mc × mc` block: row `e` a
+    /// node's polynomial, column `f` the aggregate's.
+    prolongation: Vec<Vec<f64>>,
+}
+
+impl Aggregation {
+    fn block(&self, row: usize) -> &[f64] {
+        &self.prolongation[self.child[row] as usize]
+    }
+}
+
 impl<const D: usize> NodeOperator<D> {
-    /// The Galerkin operator of aggregates of 2^D lattice neighbours, and each row's aggregate.
-    /// `prolongation` holds `mc × mc` blocks (`mc` the coarse level's polynomials); a row of
-    /// this level with `m ≤ mc` polynomials (its exponents the first `m` of the coarse ones)
-    /// takes the first `m` rows of its block.
-    fn coarsen(&self, prolongation: &[Vec<f64>], mc: usize) -> (NodeOperator<D>, Vec<u32>) {
+    /// The Galerkin operator of aggregates of lattice neighbours (along each axis
+    /// [`mirrored_pairs`] with `mirrored`, else pairs counted from one end), each row's
+    /// aggregate and `P`'s block, and the next level's lattice. `lattice` holds this level's
+    /// rows' positions per axis (in nodes of the fine grid), `spacing` the next level's scale
+    /// in the same unit, and `exponents` the next level's polynomials; a row of this level with
+    /// `m ≤ mc` polynomials (its exponents the first `m` of the coarse ones) takes the first `m`
+    /// rows of its block.
+    fn coarsen(
+        &self,
+        lattice: &Lattice<D>,
+        spacing: f64,
+        exponents: &[[u32; D]],
+        mirrored: bool,
+    ) -> (NodeOperator<D>, Aggregation, Lattice<D>) {
         let (m, mm) = (self.m, self.m * self.m);
+        let mc = exponents.len();
         let mcc = mc * mc;
         let rows = self.rows();
+        // Per axis: each node's aggregate and its offset from the aggregate's centre.
+        // Pairs keep the lattice's global numbering (node `k` in aggregate `k div 2`), so
+        // that every level is a uniform lattice whose node `k` sits at `s k + (s − 1)/2`, `s`
+        // its spacing; mirrored aggregates are numbered from the low end, their centres the
+        // means of their nodes'.
+        let axes: [AxisAggregates; D] = std::array::from_fn(|a| {
+            let position = &lattice.position[a];
+            let (aggregate, lowest) = match mirrored {
+                true => (mirrored_pairs(position.len()), 0),
+                false => {
+                    let lowest = lattice.lowest[a];
+                    let base = lowest.div_euclid(2);
+                    let aggregate = (0..position.len() as i64)
+                        .map(|t| ((lowest + t).div_euclid(2) - base) as usize)
+                        .collect();
+                    (aggregate, base)
+                }
+            };
+            let count = aggregate.last().map_or(0, |&g| g + 1);
+            let centre: Vec<f64> = match mirrored {
+                true => {
+                    let mut sums = vec![(0.0, 0.0); count];
+                    for (&g, &x) in aggregate.iter().zip(position) {
+                        sums[g] = (sums[g].0 + x, sums[g].1 + 1.0);
+                    }
+                    sums.iter().map(|&(s, n)| s / n).collect()
+                }
+                false => (0..count)
+                    .map(|g| spacing * (lowest + g as i64) as f64 + (spacing - 1.0) / 2.0)
+                    .collect(),
+            };
+            let offset = aggregate
+                .iter()
+                .zip(position)
+                .map(|(&g, &x)| (x - centre[g]) / spacing)
+                .collect();
+            AxisAggregates {
+                aggregate,
+                offset,
+                centre,
+                lowest,
+            }
+        });
+        let at = |i: usize, a: usize| (self.index[i][a] - lattice.lowest[a]) as usize;
         let mut numbers = std::collections::HashMap::<[i64; D], u32>::new();
+        let mut kinds = std::collections::HashMap::<[u64; D], u16>::new();
         let mut index = Vec::new();
+        let mut prolongation = Vec::new();
+        let mut child = vec![0u16; rows];
         let parent: Vec<u32> = (0..rows)
             .map(|i| {
                 if self.diagonal[i * mm] <= 0.0 {
                     return u32::MAX;
                 }
-                let key = self.index[i].map(|k| k.div_euclid(2));
+                let key: [i64; D] =
+                    std::array::from_fn(|a| axes[a].lowest + axes[a].aggregate[at(i, a)] as i64);
+                let offset: [f64; D] = std::array::from_fn(|a| axes[a].offset[at(i, a)]);
+                child[i] = *kinds.entry(offset.map(f64::to_bits)).or_insert_with(|| {
+                    prolongation.push(re_expansion(exponents, offset, 0.5));
+                    prolongation.len() as u16 - 1
+                });
                 *numbers.entry(key).or_insert_with(|| {
                     index.push(key);
                     index.len() as u32 - 1
                 })
             })
             .collect();
-        let child = |i: usize| -> &[f64] {
-            let c: usize = (0..D)
-                .map(|a| (self.index[i][a].rem_euclid(2) as usize) << a)
-                .sum();
-            &prolongation[c]
+        let aggregation = Aggregation {
+            parent,
+            child,
+            prolongation,
         };
+        let parent = &aggregation.parent;
+        let child = |i: usize| -> &[f64] { aggregation.block(i) };
+        // How far the aggregates of rows `radius` apart can be.
+        let radius = (0..D)
+            .flat_map(|a| {
+                let g = &axes[a].aggregate;
+                (0..g.len()).flat_map(move |t| {
+                    (t..g.len().min(t + self.radius + 1)).map(move |u| g[u] - g[t])
+                })
+            })
+            .max()
+            .unwrap_or(0);
         let coarse = index.len();
-        let radius = self.radius.div_ceil(2);
         let span = 2 * radius + 1;
         let block = span.pow(D as u32);
         let centre = (block - 1) / 2;
@@ -634,6 +790,10 @@ impl<const D: usize> NodeOperator<D> {
                 }
             }
         }
+        let coarse_lattice = Lattice {
+            lowest: std::array::from_fn(|a| axes[a].lowest),
+            position: std::array::from_fn(|a| axes[a].centre.clone()),
+        };
         (
             NodeOperator::new(
                 index,
@@ -642,7 +802,8 @@ impl<const D: usize> NodeOperator<D> {
                 block,
                 (count, column, value),
             ),
-            parent,
+            aggregation,
+            coarse_lattice,
         )
     }
 
@@ -714,8 +875,7 @@ impl<const D: usize> Multilevel<D> {
                 weak: Vec::new(),
                 reduced: Vec::new(),
                 levels: vec![fine],
-                parent: Vec::new(),
-                prolongation: Vec::new(),
+                aggregation: Vec::new(),
                 coarsest: None,
                 body: Vec::new(),
                 bodies: 0,
@@ -750,29 +910,24 @@ impl<const D: usize> Multilevel<D> {
                 }
             })
             .collect();
-        // The child at offset c ∈ {0, 1}^D of its aggregate sits (c − 1/2)/2 of the aggregate's
-        // spacing from the aggregate's centre, in half its scale.
-        let prolongation = (0..1usize << D)
-            .map(|c| {
-                let d = std::array::from_fn(|a| (((c >> a) & 1) as f64 - 0.5) / 2.0);
-                re_expansion(coarse_exponents, d, 0.5)
-            })
-            .collect::<Vec<_>>();
-        let mc = coarse_exponents.len();
+        let mut lattice = Lattice::of_nodes(&fine);
         let mut levels = vec![fine];
-        let mut parent = Vec::new();
+        let mut aggregation = Vec::new();
         loop {
             let last = levels.last().expect("the fine level");
             let rows = last.rows();
             if rows * last.m <= COARSEST_ROWS {
                 break;
             }
-            let (coarse, up) = last.coarsen(&prolongation, mc);
+            // Each level's polynomials are written in its spacing, twice the level's above.
+            let spacing = (2u64 << aggregation.len()) as f64;
+            let (coarse, up, next) = last.coarsen(&lattice, spacing, coarse_exponents, m > 1);
             if coarse.rows() * 3 > rows * 2 {
                 break;
             }
             levels.push(coarse);
-            parent.push(up);
+            aggregation.push(up);
+            lattice = next;
         }
         let last = levels.last().expect("the fine level");
         let n = last.rows();
@@ -846,8 +1001,7 @@ impl<const D: usize> Multilevel<D> {
             weak,
             reduced: reduced.to_vec(),
             levels,
-            parent,
-            prolongation,
+            aggregation,
             coarsest: if m == 1 { dense.cholesky() } else { None },
             body,
             bodies,
@@ -939,16 +1093,12 @@ impl<const D: usize> Multilevel<D> {
         }
         // The residual, restricted onto the aggregates in row order (at order 1 summed).
         level.apply(x, &mut kx);
-        let parent = &self.parent[l];
+        let aggregation = &self.aggregation[l];
+        let parent = &aggregation.parent;
         let (coarse, mc) = (self.levels[l + 1].rows(), self.levels[l + 1].m);
         let pc = mc * D;
         let mut rc = vec![0.0; coarse * pc];
-        let child = |i: usize| -> &[f64] {
-            let c: usize = (0..D)
-                .map(|a| (level.index[i][a].rem_euclid(2) as usize) << a)
-                .sum();
-            &self.prolongation[c]
-        };
+        let child = |i: usize| -> &[f64] { aggregation.block(i) };
         for (i, &a) in parent.iter().enumerate() {
             if a == u32::MAX {
                 continue;
