@@ -367,12 +367,10 @@ impl<const D: usize> GridNodes<D> {
         ]
         .map(|v| SharedSlice::new(v.as_mut_slice()));
         let touched = SharedSlice::new(touched);
-        let lumping = lumping.as_mut().map(|l| {
-            (
-                SharedSlice::new(&mut l.mass),
-                SharedSlice::new(&mut l.blend),
-            )
-        });
+        // The blend stays: VC reads it after the transfer weights are made (`edge_lumping`).
+        let lumping = lumping
+            .as_mut()
+            .map(|l| (SharedSlice::new(&mut l.mass), ()));
         // SAFETY: `active` lists each node once, so every node is written by one task only;
         // empty fields (not kept) are skipped.
         active.par_iter().for_each(|&n| unsafe {
@@ -384,9 +382,8 @@ impl<const D: usize> GridNodes<D> {
             scalars.iter().for_each(|m| *m.at(n) = 0.0);
             zero(&vectors);
             *touched.at(n) = false;
-            if let Some((m, blend)) = &lumping {
+            if let Some((m, _)) = &lumping {
                 *m.at(n) = 0.0;
-                *blend.at(n) = 1.0;
             }
         });
         active.clear();

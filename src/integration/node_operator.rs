@@ -327,6 +327,38 @@ impl<const D: usize> NodeOperator<D> {
     }
 
     /// Rows (nodes, or aggregates).
+    /// Adds the damping `d_I A_I` of [`super::VC_REGULARISATION`] to the diagonal blocks (the
+    /// constant entry alone on the `reduced` rows, which are corrected to order 1), and
+    /// `(1 + d_I) A_I` to the moment blocks that bound the rows from above, so that the smoother
+    /// and the coarse levels built from this operator see it.
+    pub fn add_damping(&mut self, damping: &[f64], reduced: &[bool]) {
+        let (m, mm) = (self.m, self.m * self.m);
+        for (slot, &d) in damping.iter().enumerate() {
+            if d == 0.0 || self.diagonal[slot * mm] <= 0.0 {
+                continue;
+            }
+            let a: Vec<f64> = self.moment[slot * mm..(slot + 1) * mm].to_vec();
+            let entries = if reduced[slot] { 1 } else { m };
+            let start = slot * self.block;
+            let n = self.count[slot] as usize;
+            let e = (0..n)
+                .find(|&e| self.column[start + e] as usize == slot)
+                .expect("a row holds its diagonal block");
+            let value = &mut self.value[(start + e) * mm..(start + e + 1) * mm];
+            let diagonal = &mut self.diagonal[slot * mm..(slot + 1) * mm];
+            for i in 0..entries {
+                for j in 0..entries {
+                    value[i * m + j] += d * a[i * m + j];
+                    diagonal[i * m + j] += d * a[i * m + j];
+                }
+            }
+            let moment = &mut self.moment[slot * mm..(slot + 1) * mm];
+            moment.iter_mut().for_each(|v| *v *= 1.0 + d);
+            let inverse = block_inverse(moment, m);
+            self.inverse[slot * mm..(slot + 1) * mm].copy_from_slice(&inverse);
+        }
+    }
+
     fn rows(&self) -> usize {
         self.index.len()
     }

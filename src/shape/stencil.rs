@@ -237,6 +237,12 @@ impl<const D: usize> Stencils<D> {
         }
     }
 
+    /// The transfer weights of particle `p`, when they are set (signed shape functions).
+    #[inline]
+    pub fn transfer_of(&self, p: usize) -> Option<&[f64]> {
+        (!self.transfer.is_empty()).then(|| &self.transfer[p * self.len..(p + 1) * self.len])
+    }
+
     /// The lumping weights of particle `p`, when the shape function is signed.
     #[inline]
     pub fn lumping_of(&self, p: usize) -> Option<&[f64]> {

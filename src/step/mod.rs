@@ -33,7 +33,7 @@
 mod checks;
 mod constitutive_update;
 mod contact;
-mod edge_lumping;
+pub(crate) mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
 mod musl;

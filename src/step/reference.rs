@@ -18,7 +18,9 @@
 //! fast step runs conjugate gradients preconditioned with the node blocks or a V-cycle.
 
 use crate::grid::{EdgeLumping, Grid, GridNodes};
-use crate::integration::{VC_EDGE_REACH, VC_MAX_CORRECTION, VC_REGULARISATION};
+use crate::integration::{
+    VC_EDGE_DAMPING_FLOOR, VC_EDGE_REACH, VC_MAX_CORRECTION, VC_REGULARISATION,
+};
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::options::{Shape, Transfer};
 use crate::sim::Sim;
@@ -62,7 +64,7 @@ fn blend_transfer_weights<const D: usize>(
     sim: &Sim<D>,
     stencils: &mut [Stencil<D>],
     body: Option<u32>,
-) -> crate::Result<()> {
+) -> crate::Result<Vec<f64>> {
     let member = |p: usize| body.is_none_or(|b| sim.particles.material[p] == b);
     let mut nodes = GridNodes::<D>::default();
     nodes.ensure(&sim.grid, true, false, false)?;
@@ -84,21 +86,35 @@ fn blend_transfer_weights<const D: usize>(
         .walls
         .unfold_values(&sim.grid, &nodes.active, &mut theta);
     for (_, s) in stencils.iter_mut().enumerate().filter(|&(p, _)| member(p)) {
-        if s.nodes.iter().all(|&n| theta[n] == 1.0) {
-            continue;
-        }
-        for k in 0..s.nodes.len() {
-            let t = theta[s.nodes[k]];
-            s.transfer[k] = t * s.values[k] + (1.0 - t) * s.lumping[k];
-        }
-        let sum: f64 = s.transfer.iter().sum();
-        if sum > 0.5 {
-            s.transfer.iter_mut().for_each(|w| *w /= sum);
-        } else {
-            s.transfer.clone_from(&s.lumping);
-        }
+        blend(s, &theta);
     }
-    Ok(())
+    Ok(theta)
+}
+
+/// Sets a stencil's transfer weights from the nodes' `θ`.
+fn blend<const D: usize>(s: &mut Stencil<D>, theta: &[f64]) {
+    if s.nodes.iter().all(|&n| theta[n] == 1.0) {
+        return;
+    }
+    for k in 0..s.nodes.len() {
+        let t = theta[s.nodes[k]];
+        s.transfer[k] = t * s.values[k] + (1.0 - t) * s.lumping[k];
+    }
+    let sum: f64 = s.transfer.iter().sum();
+    if sum > 0.5 {
+        s.transfer.iter_mut().for_each(|w| *w /= sum);
+    } else {
+        s.transfer.clone_from(&s.lumping);
+    }
+}
+
+/// A boundary point's stencil with its transfer weights: VC's test function there.
+fn test_stencil<const D: usize>(sim: &Sim<D>, x: &Vector<D>, theta: Option<&[f64]>) -> Stencil<D> {
+    let mut s = stencil(sim, x);
+    if let Some(theta) = theta {
+        blend(&mut s, theta);
+    }
+    s
 }
 
 fn node_position<const D: usize>(grid: &Grid<D>, n: usize) -> Vector<D> {
@@ -116,6 +132,9 @@ fn in_support<const D: usize>(s: &Stencil<D>, k: usize) -> bool {
 /// joined by a particle's support), named by one of its rows.
 struct VcNodes<'a, const D: usize> {
     surface: crate::BoundaryPoints<D>,
+    /// The nodes' `θ` of the transfer weights (signed shapes), which give the test function
+    /// at the boundary points.
+    theta: Option<&'a [f64]>,
     members: Vec<usize>,
     stencils: Vec<&'a Stencil<D>>,
     row: BTreeMap<usize, usize>,
@@ -126,6 +145,7 @@ fn vc_nodes<'a, const D: usize>(
     sim: &Sim<D>,
     all_stencils: &'a [Stencil<D>],
     body: Option<u32>,
+    theta: Option<&'a [f64]>,
 ) -> crate::Result<VcNodes<'a, D>> {
     let ps = &sim.particles;
     let surface = match sim.boundary.is_empty() {
@@ -167,6 +187,7 @@ fn vc_nodes<'a, const D: usize>(
     let body = (0..row.len()).map(|i| root(&mut parent, i)).collect();
     Ok(VcNodes {
         surface,
+        theta,
         members,
         stencils,
         row,
@@ -181,8 +202,9 @@ fn vc_corrections<const D: usize>(
     all_stencils: &[Stencil<D>],
     body: Option<u32>,
     order: u32,
+    theta: Option<&[f64]>,
 ) -> crate::Result<Vec<Vec<Vector<D>>>> {
-    let nodes = vc_nodes(sim, all_stencils, body)?;
+    let nodes = vc_nodes(sim, all_stencils, body, theta)?;
     Ok(match order {
         1 => vc_corrections_first_order(sim, all_stencils, &nodes),
         _ => vc_corrections_higher_order(sim, all_stencils, &nodes, order),
@@ -210,6 +232,7 @@ fn vc_corrections_first_order<const D: usize>(
     let h = grid.cell_size;
     let VcNodes {
         surface,
+        theta,
         members,
         stencils,
         row,
@@ -227,9 +250,9 @@ fn vc_corrections_first_order<const D: usize>(
         }
     }
     for b in 0..surface.len() {
-        let sb = stencil(sim, &surface.position[b]);
-        for (&n, &w) in sb.nodes.iter().zip(&sb.values) {
-            if let (true, Some(&i)) = (w != 0.0, row.get(&n)) {
+        let sb = test_stencil(sim, &surface.position[b], *theta);
+        for ((&n, &psi), &w) in sb.nodes.iter().zip(&sb.values).zip(&sb.transfer) {
+            if let (true, Some(&i)) = (psi != 0.0, row.get(&n)) {
                 rhs[i] += w * surface.area_normal[b];
             }
         }
@@ -374,8 +397,10 @@ const VC_NULL_EIGENVALUE: f64 = 1e-12;
 ///
 /// ```text
 /// K ζ = r,  K_(Iα)(Jβ) = δ_IJ A_I,αβ − Σ_p V_p |Ψ_I| |Ψ_J| Q_Iα Q_Jβ / W_p,
-/// A_I = Σ_p V_p |Ψ_I| Q_I Q_Iᵀ,  r_Iα = Σ_b Ψ_I Q_Iα n_b a_b − Σ_p V_p (∇Ψ_I Q_Iα + Ψ_I ∇Q_Iα).
+/// A_I = Σ_p V_p |Ψ_I| Q_I Q_Iᵀ,  r_Iα = Σ_b Φ_I Q_Iα n_b a_b − Σ_p V_p (∇Ψ_I Q_Iα + Φ_I ∇Q_Iα).
 /// ```
+///
+/// (`Φ` the transfer weights, the test function: `Ψ` but at a signed shape's body edge.)
 ///
 /// A node whose `A_I` is nearly singular (smallest to largest eigenvalue at most
 /// `VC_MIN_RELATIVE_EIGENVALUE`) keeps its constant unknown only. The right-hand side loses,
@@ -383,7 +408,8 @@ const VC_NULL_EIGENVALUE: f64 = 1e-12;
 /// (`K`'s null space for a body without such nodes), re-expanded about each node, before those
 /// nodes' higher rows are dropped. The system is scaled by the Cholesky factors of the blocks
 /// `A_I` (the fast step's preconditioner), damped at the edge nodes as the fast step damps it
-/// (`K + ε E A`, `VC_REGULARISATION`: `ε` on their scaled diagonal) and solved by the
+/// (`K + ε E A`, `VC_REGULARISATION`: `ε` on their scaled diagonal, scaled up to the floor
+/// `VC_EDGE_DAMPING_FLOOR`) and solved by the
 /// pseudo-inverse of its eigenvalues above `VC_NULL_EIGENVALUE`: where the fast step's conjugate
 /// gradients, started from zero, converge.
 fn vc_corrections_higher_order<const D: usize>(
@@ -397,6 +423,7 @@ fn vc_corrections_higher_order<const D: usize>(
     let h = grid.cell_size;
     let VcNodes {
         surface,
+        theta,
         members,
         stencils,
         row,
@@ -433,15 +460,15 @@ fn vc_corrections_higher_order<const D: usize>(
                     a[i][(al, be)] += v * s.values[k].abs() * q[al] * q[be];
                 }
                 for c in 0..D {
-                    r[i][(al, c)] -= v * (s.gradients[k][c] * q[al] + s.values[k] * dq[c][al]);
+                    r[i][(al, c)] -= v * (s.gradients[k][c] * q[al] + s.transfer[k] * dq[c][al]);
                 }
             }
         }
     }
     for b in 0..surface.len() {
-        let sb = stencil(sim, &surface.position[b]);
-        for (&n, &w) in sb.nodes.iter().zip(&sb.values) {
-            if let (true, Some(&i)) = (w != 0.0, row.get(&n)) {
+        let sb = test_stencil(sim, &surface.position[b], *theta);
+        for ((&n, &psi), &w) in sb.nodes.iter().zip(&sb.values).zip(&sb.transfer) {
+            if let (true, Some(&i)) = (psi != 0.0, row.get(&n)) {
                 let (q, _) = q_at(i, &surface.position[b]);
                 for al in 0..m {
                     for c in 0..D {
@@ -538,12 +565,14 @@ fn vc_corrections_higher_order<const D: usize>(
         .try_inverse()
         .expect("the node blocks' Cholesky factors");
     let mut scaled = &inverse * &k * inverse.transpose();
-    // The edge nodes' damping `ε A_I`: `ε` on their unknowns once scaled.
+    // The edge nodes' damping `ε A_I`, scaled up to its floor: `ε` times that scale on their
+    // unknowns once scaled.
     let reach = a.iter().map(|a| a[(0, 0)]).fold(0.0, f64::max);
     for i in 0..used {
         if reduced[i] || a[i][(0, 0)] < VC_EDGE_REACH * reach {
+            let floor = (VC_EDGE_DAMPING_FLOOR * reach / a[i][(0, 0)]).max(1.0);
             for al in 0..width[i] {
-                scaled[(first[i] + al, first[i] + al)] += VC_REGULARISATION;
+                scaled[(first[i] + al, first[i] + al)] += VC_REGULARISATION * floor;
             }
         }
     }
@@ -955,17 +984,22 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
     let mass_floor = if floored { 1e-10 * largest_mass } else { 0.0 };
     let mut fields = Vec::new();
     for &body in &bodies {
-        if signed {
-            blend_transfer_weights(sim, &mut stencils, body)?;
-        }
+        let theta = match signed {
+            true => Some(blend_transfer_weights(sim, &mut stencils, body)?),
+            false => None,
+        };
         let mut nodes = GridNodes::<D>::default();
         nodes.ensure(grid, false, contact.is_some(), signed || sim.vc.is_some())?;
         let rigid_velocity = body.and_then(|b| rigid[b as usize]);
         // VC's corrections, particle to grid, grid update.
         let vc = match &sim.vc {
-            Some(vc) if rigid_velocity.is_none() => {
-                Some(vc_corrections(sim, &stencils, body, vc.order)?)
-            }
+            Some(vc) if rigid_velocity.is_none() => Some(vc_corrections(
+                sim,
+                &stencils,
+                body,
+                vc.order,
+                theta.as_deref(),
+            )?),
             _ => None,
         };
         let map = Map {
