@@ -368,9 +368,7 @@ impl<const D: usize> GridNodes<D> {
         .map(|v| SharedSlice::new(v.as_mut_slice()));
         let touched = SharedSlice::new(touched);
         // The blend stays: VC reads it after the transfer weights are made (`edge_lumping`).
-        let lumping = lumping
-            .as_mut()
-            .map(|l| (SharedSlice::new(&mut l.mass), ()));
+        let lumped_mass = lumping.as_mut().map(|l| SharedSlice::new(&mut l.mass));
         // SAFETY: `active` lists each node once, so every node is written by one task only;
         // empty fields (not kept) are skipped.
         active.par_iter().for_each(|&n| unsafe {
@@ -382,7 +380,7 @@ impl<const D: usize> GridNodes<D> {
             scalars.iter().for_each(|m| *m.at(n) = 0.0);
             zero(&vectors);
             *touched.at(n) = false;
-            if let Some((m, _)) = &lumping {
+            if let Some(m) = &lumped_mass {
                 *m.at(n) = 0.0;
             }
         });

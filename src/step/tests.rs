@@ -1681,8 +1681,8 @@ fn rk2_vc2_column_in_its_exact_stress_state_stays_at_rest() {
     sim.add_particles(m, &x, &vol, None).unwrap();
     let (bx, bn) = crate::BoundaryPoints::<2>::from_lattice(&x, &vol);
     sim.add_boundary_points(&bx, &bn, None).unwrap();
-    for p in 0..x.len() {
-        let s = -rho * g * (height - x[p][1]);
+    for (p, xp) in x.iter().enumerate() {
+        let s = -rho * g * (height - xp[1]);
         sim.particles.stress[p] = Matrix::<2>::new(nu / (1.0 - nu) * s, 0.0, 0.0, s);
     }
     let dt = sim.stable_dt(0.3).unwrap();
