@@ -599,12 +599,13 @@ impl<const D: usize> VcCorrection<D> {
         }));
         let edge = edge;
         let edge_damping: Vec<f64> = (0..slots)
-            .map(|slot| match m > 1 && damping > 0.0 && edge[slot] {
-                true => {
-                    let floor = VC_EDGE_DAMPING_FLOOR * reach / moment[slot * m * m];
-                    damping * floor.max(1.0)
+            .map(|slot| {
+                let a = moment[slot * m * m];
+                match m > 1 && damping > 0.0 && edge[slot] && a > 0.0 {
+                    true => damping * (VC_EDGE_DAMPING_FLOOR * reach / a).max(1.0),
+                    // A row without reach takes no part (nothing to damp).
+                    false => 0.0,
                 }
-                false => 0.0,
             })
             .collect();
         let multilevel = assembled

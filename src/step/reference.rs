@@ -570,7 +570,10 @@ fn vc_corrections_higher_order<const D: usize>(
     let reach = a.iter().map(|a| a[(0, 0)]).fold(0.0, f64::max);
     for i in 0..used {
         if reduced[i] || a[i][(0, 0)] < VC_EDGE_REACH * reach {
-            let floor = (VC_EDGE_DAMPING_FLOOR * reach / a[i][(0, 0)]).max(1.0);
+            let floor = match a[i][(0, 0)] > 0.0 {
+                true => (VC_EDGE_DAMPING_FLOOR * reach / a[i][(0, 0)]).max(1.0),
+                false => 1.0,
+            };
             for al in 0..width[i] {
                 scaled[(first[i] + al, first[i] + al)] += VC_REGULARISATION * floor;
             }
