@@ -326,7 +326,6 @@ impl<const D: usize> NodeOperator<D> {
         }
     }
 
-    /// Rows (nodes, or aggregates).
     /// Adds the damping `d_I A_I` of [`super::VC_REGULARISATION`] to the diagonal blocks (the
     /// constant entry alone on the `reduced` rows, which are corrected to order 1), and
     /// `(1 + d_I) A_I` to the moment blocks that bound the rows from above, so that the smoother
@@ -359,6 +358,7 @@ impl<const D: usize> NodeOperator<D> {
         }
     }
 
+    /// Rows (nodes, or aggregates).
     fn rows(&self) -> usize {
         self.index.len()
     }
