@@ -145,7 +145,10 @@ impl<const D: usize> BoundaryPoints<D> {
     /// `x_p + F_p [−s/2, s/2]^D`, taken a little larger (`SURFACE_DOMAIN_SCALE`) so that
     /// neighbouring domains that do not quite meet still close. The voxels, aligned with
     /// `origin`, have a side `v` that divides half a grid cell (`cell_size / 2`) and is at most
-    /// `max_p (J_p V⁰_p)^{1/D} / 2`; those whose centres lie in some domain and in the box
+    /// half the largest domain as taken, `SURFACE_DOMAIN_SCALE · max_p (J_p V⁰_p)^{1/D} / 2`
+    /// (so a body of two particles per cell per direction, compressed or stretched by up to a
+    /// fifth, keeps two voxels per particle and axis, whose faces merge below, rather than
+    /// jumping to three, nine times the points in 3D); those whose centres lie in some domain and in the box
     /// `[origin, upper]` are the body. Every voxel face between the body and an empty voxel is
     /// a surface element: its `2^{D−1}` two-point Gauss points, each with its share of the area
     /// normal `±e_a v^{D−1}`. No face straddles a knot of the shape functions (nodes and
@@ -179,7 +182,7 @@ impl<const D: usize> BoundaryPoints<D> {
                 (SURFACE_DOMAIN_SCALE * 0.5 * s, inverse, s * root(j.abs()))
             })
             .collect();
-        let target = 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
+        let target = SURFACE_DOMAIN_SCALE * 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
         if !(target > 0.0 && target.is_finite()) {
             return (Vec::new(), Vec::new());
         }
@@ -666,6 +669,37 @@ mod tests {
                 (0..3).any(|a| p[a].abs() < 1e-12 || (p[a] - [0.5, 0.4, 0.3][a]).abs() < 1e-12);
             assert!(on, "{p}");
         }
+    }
+
+    /// A body compressed by a tenth keeps voxels of a quarter cell (two per particle and axis,
+    /// faces merged where they fall within a half cell): 480 points, at most twice the
+    /// undeformed box's 376, where voxels taken from its spacing alone would be a sixth of a
+    /// cell, unmerged: about 2 700 (its area over `v²`, four points each). The surface stays
+    /// closed and encloses the compressed box to within one voxel layer.
+    #[test]
+    fn a_compressed_body_keeps_its_voxels() {
+        let (s, x) = (0.1, box_5_4_3());
+        let squeezed: Vec<Vector<3>> = x.iter().map(|x| 0.9 * x).collect();
+        let vol = vec![s * s * s; x.len()];
+        let f = vec![0.9 * Matrix::<3>::identity(); x.len()];
+        let (pts, normals) = BoundaryPoints::of_particles(
+            (&Vector::zeros(), &Vector::from_element(1.0)),
+            2.0 * s,
+            &squeezed,
+            &vol,
+            &f,
+        );
+        let (lattice, _) = BoundaryPoints::from_lattice(&x, &vol);
+        assert!(pts.len() <= 2 * 4 * lattice.len(), "{} points", pts.len());
+        assert!(normals.iter().sum::<Vector<3>>().norm() < 1e-15);
+        // Each side within one voxel (a quarter cell, 0.05) of the compressed box's.
+        let (v, sides) = (0.05, [0.45, 0.36, 0.27]);
+        let (lo, hi) = (
+            sides.iter().map(|a| a - v).product::<f64>(),
+            sides.iter().map(|a| a + v).product::<f64>(),
+        );
+        let volume = enclosed(&pts, &normals);
+        assert!(volume > lo && volume < hi, "{volume} outside ({lo}, {hi})");
     }
 
     /// A body that breaks apart gets the faces of the crack: two blocks three spacings apart
