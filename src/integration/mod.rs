@@ -1084,6 +1084,9 @@ struct NullSpace<'a, const D: usize> {
     exps: Vec<[u32; D]>,
     nulls: Vec<[u32; D]>,
     centroid: Vec<Vector<D>>,
+    /// Per slot, `N_I` ([`NullSpace::expansion`]), `m k` values (zero where unused): each
+    /// projection reads it twice per slot.
+    table: Vec<f64>,
     /// Per body, the pseudo-inverse of `G = Σ_I a_I N_Iᵀ N_I`.
     gram_inverse: Vec<DMatrix<f64>>,
 }
@@ -1121,16 +1124,23 @@ impl<'a, const D: usize> NullSpace<'a, D> {
             exps,
             nulls,
             centroid,
+            table: Vec::new(),
             gram_inverse: Vec::new(),
         };
         let (m, k) = (space.exps.len(), space.nulls.len());
+        let mut table = vec![0.0; body_of.len() * m * k];
+        table
+            .par_chunks_exact_mut(m * k)
+            .enumerate()
+            .filter(|&(slot, _)| used[slot])
+            .for_each(|(slot, n)| space.expansion(slot, n));
+        space.table = table;
         let mut gram = vec![DMatrix::<f64>::zeros(k, k); bodies];
-        let mut n = vec![0.0; m * k];
         for (slot, &b) in body_of.iter().enumerate() {
             if !used[slot] {
                 continue;
             }
-            space.null_at(slot, &mut n);
+            let n = space.null_at(slot);
             let a = space.weight_of(slot);
             for f in 0..k {
                 for g in 0..k {
@@ -1155,8 +1165,15 @@ impl<'a, const D: usize> NullSpace<'a, D> {
         self.weight.map_or(1.0, |w| w[slot])
     }
 
+    /// `N_I[e][f]` (`e k + f`), from the table.
+    #[inline]
+    fn null_at(&self, slot: usize) -> &[f64] {
+        let mk = self.exps.len() * self.nulls.len();
+        &self.table[slot * mk..(slot + 1) * mk]
+    }
+
     /// `N_I[e][f]`: coefficient of `z^e` in the re-expansion of the null monomial `f`.
-    fn null_at(&self, slot: usize, out: &mut [f64]) {
+    fn expansion(&self, slot: usize, out: &mut [f64]) {
         let binomial = |n: u32, k: u32| -> f64 {
             (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
         };
@@ -1182,59 +1199,35 @@ impl<'a, const D: usize> NullSpace<'a, D> {
     /// weights' inner product: `v_I −= N_I G⁻¹ Σ_J N_Jᵀ a_J v_J`, after which
     /// `Σ_J a_J N_Jᵀ v_J = 0` per body. `K v` is unchanged.
     fn remove_from_coefficients(&self, v: &mut [f64]) {
-        let (m, k) = (self.exps.len(), self.nulls.len());
-        let bodies = self.gram_inverse.len();
-        let mut t = vec![DMatrix::<f64>::zeros(k, D); bodies];
-        let mut n = vec![0.0; m * k];
-        for (slot, &b) in self.body_of.iter().enumerate() {
-            if !self.used[slot] {
-                continue;
-            }
-            self.null_at(slot, &mut n);
-            let a = self.weight_of(slot);
-            let r = &v[slot * m * D..(slot + 1) * m * D];
-            for f in 0..k {
-                for c in 0..D {
-                    t[b][(f, c)] += a * (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
-                }
-            }
-        }
-        let alpha: Vec<DMatrix<f64>> = self
-            .gram_inverse
-            .iter()
-            .zip(t)
-            .map(|(g, t)| g * t)
-            .collect();
-        for (slot, &b) in self.body_of.iter().enumerate() {
-            if !self.used[slot] {
-                continue;
-            }
-            self.null_at(slot, &mut n);
-            let r = &mut v[slot * m * D..(slot + 1) * m * D];
-            for c in 0..D {
-                for e in 0..m {
-                    r[c * m + e] -= (0..k).map(|f| n[e * k + f] * alpha[b][(f, c)]).sum::<f64>();
-                }
-            }
-        }
+        self.project(v, true);
     }
 
     /// Removes from `v` (per slot, `m` values per direction) its part along the null space:
     /// `v_I −= a_I N_I G⁻¹ Σ_J N_Jᵀ v_J`, after which `Σ_J N_Jᵀ v_J = 0` per body.
     fn remove(&self, v: &mut [f64]) {
+        self.project(v, false);
+    }
+
+    /// The two projections: the weights `a_J` in the sums (`coefficients`) or in the update.
+    /// The sums run in slot order (the same bits with any number of threads), the update in
+    /// parallel.
+    fn project(&self, v: &mut [f64], coefficients: bool) {
         let (m, k) = (self.exps.len(), self.nulls.len());
         let bodies = self.gram_inverse.len();
         let mut t = vec![DMatrix::<f64>::zeros(k, D); bodies];
-        let mut n = vec![0.0; m * k];
         for (slot, &b) in self.body_of.iter().enumerate() {
             if !self.used[slot] {
                 continue;
             }
-            self.null_at(slot, &mut n);
+            let n = self.null_at(slot);
             let r = &v[slot * m * D..(slot + 1) * m * D];
             for f in 0..k {
                 for c in 0..D {
-                    t[b][(f, c)] += (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
+                    let sum = (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
+                    t[b][(f, c)] += match coefficients {
+                        true => self.weight_of(slot) * sum,
+                        false => sum,
+                    };
                 }
             }
         }
@@ -1244,20 +1237,21 @@ impl<'a, const D: usize> NullSpace<'a, D> {
             .zip(t)
             .map(|(g, t)| g * t)
             .collect();
-        for (slot, &b) in self.body_of.iter().enumerate() {
-            if !self.used[slot] {
-                continue;
-            }
-            self.null_at(slot, &mut n);
-            let r = &mut v[slot * m * D..(slot + 1) * m * D];
-            let a = self.weight_of(slot);
-            for c in 0..D {
-                for e in 0..m {
-                    r[c * m + e] -=
-                        a * (0..k).map(|f| n[e * k + f] * alpha[b][(f, c)]).sum::<f64>();
+        v.par_chunks_exact_mut(m * D)
+            .enumerate()
+            .filter(|&(slot, _)| self.used[slot])
+            .for_each(|(slot, r)| {
+                let (n, alpha) = (self.null_at(slot), &alpha[self.body_of[slot]]);
+                for c in 0..D {
+                    for e in 0..m {
+                        let sum = (0..k).map(|f| n[e * k + f] * alpha[(f, c)]).sum::<f64>();
+                        r[c * m + e] -= match coefficients {
+                            true => sum,
+                            false => self.weight_of(slot) * sum,
+                        };
+                    }
                 }
-            }
-        }
+            });
     }
 }
 
