@@ -224,36 +224,34 @@ impl<const D: usize> NodeOperator<D> {
                 });
             }
         }
-        // K = diag(A) − B, packed; a reduced node's rows and columns of degree ≥ 1 zero.
+        // K = diag(A) − B, packed in place (entry `k` of a row from its block entry `e ≥ k`);
+        // a reduced node's rows and columns of degree ≥ 1 zero.
         let mut count = vec![0u32; slots];
         let mut column = vec![0u32; slots * block];
-        let mut value = vec![0.0; slots * block * mm];
+        let mut value = dense;
         count
             .par_iter_mut()
             .zip(column.par_chunks_mut(block))
             .zip(value.par_chunks_mut(block * mm))
-            .zip(dense.par_chunks(block * mm))
             .enumerate()
-            .for_each(|(slot, (((count, column), value), b))| {
+            .for_each(|(slot, ((count, column), row))| {
                 let node = nodes.active[slot] as isize;
                 let mut k = 0;
                 for e in 0..block {
-                    let b = &b[e * mm..(e + 1) * mm];
-                    if e != centre && b.iter().all(|&x| x == 0.0) {
+                    if e != centre && row[e * mm..(e + 1) * mm].iter().all(|&x| x == 0.0) {
                         continue;
                     }
                     let col = nodes.slot((node + step[e]) as usize);
-                    let v = &mut value[k * mm..(k + 1) * mm];
-                    for (i, v) in v.iter_mut().enumerate() {
-                        *v = if e == centre {
-                            moment[slot * mm + i] - b[i]
-                        } else {
-                            -b[i]
-                        };
+                    for i in 0..mm {
+                        let b = row[e * mm + i];
                         let (a, c) = (i / m, i % m);
-                        if (a > 0 && reduced[slot]) || (c > 0 && reduced[col]) {
-                            *v = 0.0;
-                        }
+                        row[k * mm + i] = if (a > 0 && reduced[slot]) || (c > 0 && reduced[col]) {
+                            0.0
+                        } else if e == centre {
+                            moment[slot * mm + i] - b
+                        } else {
+                            -b
+                        };
                     }
                     column[k] = col as u32;
                     k += 1;
