@@ -1214,17 +1214,19 @@ impl<'a, const D: usize> NullSpace<'a, D> {
     fn project(&self, v: &mut [f64], coefficients: bool) {
         let (m, k) = (self.exps.len(), self.nulls.len());
         let bodies = self.gram_inverse.len();
-        let mut t = vec![DMatrix::<f64>::zeros(k, D); bodies];
+        // Per body, `Σ_J N_Jᵀ (a_J) v_J`, `k × D` row-major.
+        let mut t = vec![0.0; bodies * k * D];
         for (slot, &b) in self.body_of.iter().enumerate() {
             if !self.used[slot] {
                 continue;
             }
             let n = self.null_at(slot);
             let r = &v[slot * m * D..(slot + 1) * m * D];
+            let t = &mut t[b * k * D..(b + 1) * k * D];
             for f in 0..k {
                 for c in 0..D {
                     let sum = (0..m).map(|e| n[e * k + f] * r[c * m + e]).sum::<f64>();
-                    t[b][(f, c)] += match coefficients {
+                    t[f * D + c] += match coefficients {
                         true => self.weight_of(slot) * sum,
                         false => sum,
                     };
@@ -1234,8 +1236,8 @@ impl<'a, const D: usize> NullSpace<'a, D> {
         let alpha: Vec<DMatrix<f64>> = self
             .gram_inverse
             .iter()
-            .zip(t)
-            .map(|(g, t)| g * t)
+            .zip(t.chunks_exact(k * D))
+            .map(|(g, t)| g * DMatrix::from_row_slice(k, D, t))
             .collect();
         v.par_chunks_exact_mut(m * D)
             .enumerate()
