@@ -148,8 +148,8 @@ impl<const D: usize> BoundaryPoints<D> {
     /// half the largest domain as taken, `SURFACE_DOMAIN_SCALE · max_p (J_p V⁰_p)^{1/D} / 2`
     /// (so a body of two particles per cell per direction, compressed or stretched by up to a
     /// fifth, keeps two voxels per particle and axis, whose faces merge below, rather than
-    /// jumping to three, nine times the points in 3D); those whose centres lie in some domain and in the box
-    /// `[origin, upper]` are the body. Every voxel face between the body and an empty voxel is
+    /// jumping to three, nine times the points in 3D); those whose centres lie in some domain
+    /// and in the box `[origin, upper]` are the body. Every voxel face between the body and an empty voxel is
     /// a surface element: its `2^{D−1}` two-point Gauss points, each with its share of the area
     /// normal `±e_a v^{D−1}`. No face straddles a knot of the shape functions (nodes and
     /// half-cells), so `Σ_b Ψ_I n_b a_b` is the voxel surface's integral exactly for the
