@@ -627,6 +627,24 @@ mod tests {
             .collect()
     }
 
+    /// [`BoundaryPoints::of_particles`] in the unit box, on a grid of cells `2 s` wide (two
+    /// particles of spacing `s` per cell per direction).
+    fn in_unit_box<const D: usize>(
+        s: f64,
+        x: &[Vector<D>],
+        volumes: &[f64],
+        deformation_gradients: &[Matrix<D>],
+    ) -> (Vec<Vector<D>>, Vec<Vector<D>>) {
+        let (origin, upper) = (Vector::zeros(), Vector::from_element(1.0));
+        BoundaryPoints::of_particles(
+            (&origin, &upper),
+            2.0 * s,
+            x,
+            volumes,
+            deformation_gradients,
+        )
+    }
+
     /// `Σ x·(n a) / D`: the volume a closed surface encloses (divergence theorem).
     fn enclosed<const D: usize>(x: &[Vector<D>], na: &[Vector<D>]) -> f64 {
         x.iter().zip(na).map(|(x, n)| x.dot(n)).sum::<f64>() / D as f64
@@ -642,13 +660,7 @@ mod tests {
         let (s, x) = (0.1, box_5_4_3());
         let vol = vec![s * s * s; x.len()];
         let f = vec![Matrix::<3>::identity(); x.len()];
-        let (pts, normals) = BoundaryPoints::of_particles(
-            (&Vector::zeros(), &Vector::from_element(1.0)),
-            2.0 * s,
-            &x,
-            &vol,
-            &f,
-        );
+        let (pts, normals) = in_unit_box(s, &x, &vol, &f);
         let (lattice, lattice_normals) = BoundaryPoints::from_lattice(&x, &vol);
         assert_eq!(pts.len(), 4 * lattice.len());
         let moment = |x: &[Vector<3>], n: &[Vector<3>]| {
@@ -682,13 +694,7 @@ mod tests {
         let squeezed: Vec<Vector<3>> = x.iter().map(|x| 0.9 * x).collect();
         let vol = vec![s * s * s; x.len()];
         let f = vec![0.9 * Matrix::<3>::identity(); x.len()];
-        let (pts, normals) = BoundaryPoints::of_particles(
-            (&Vector::zeros(), &Vector::from_element(1.0)),
-            2.0 * s,
-            &squeezed,
-            &vol,
-            &f,
-        );
+        let (pts, normals) = in_unit_box(s, &squeezed, &vol, &f);
         let (lattice, _) = BoundaryPoints::from_lattice(&x, &vol);
         assert!(pts.len() <= 2 * 4 * lattice.len(), "{} points", pts.len());
         assert!(normals.iter().sum::<Vector<3>>().norm() < 1e-15);
@@ -713,13 +719,7 @@ mod tests {
             x.extend(block_2d(4, 3, s, Vector::<2>::new(0.2, 0.35 + gap)));
             let vol = vec![s * s; x.len()];
             let f = vec![Matrix::<2>::identity(); x.len()];
-            BoundaryPoints::of_particles(
-                (&Vector::zeros(), &Vector::from_element(1.0)),
-                2.0 * s,
-                &x,
-                &vol,
-                &f,
-            )
+            in_unit_box(s, &x, &vol, &f)
         };
         let (x, na) = surface(0.15);
         let area: f64 = na.iter().map(|n| n.norm()).sum();
@@ -807,9 +807,8 @@ mod tests {
                 site
             })
             .collect();
-        let (pts, na) = BoundaryPoints::of_particles(
-            (&Vector::zeros(), &Vector::from_element(1.0)),
-            2.0 * s,
+        let (pts, na) = in_unit_box(
+            s,
             &x,
             &vec![s.powi(D as i32); x.len()],
             &vec![
@@ -856,9 +855,8 @@ mod tests {
             })
             .map(|(_, x)| x)
             .collect();
-        let (pts, na) = BoundaryPoints::of_particles(
-            (&Vector::zeros(), &Vector::from_element(1.0)),
-            2.0 * s,
+        let (pts, na) = in_unit_box(
+            s,
             &x,
             &vec![s * s; x.len()],
             &vec![Matrix::<2>::identity(); x.len()],
