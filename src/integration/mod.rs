@@ -267,7 +267,8 @@ pub struct VcCorrection<const D: usize> {
     /// Per particle: the mean `μ_p` of the node corrections over its support, per direction,
     /// and at order 1 the slope `C_p` of their linear fit (zero at order ≥ 2).
     fit: Vec<(Vector<D>, Matrix<D>)>,
-    /// Per particle at order 1: its fit's frame `(T_p, o_p)`, see [`linear_frame`].
+    /// Per particle with the order-1 linear fit: its frame `(T_p, o_p)`, see [`linear_frame`]
+    /// (empty with the mean fit).
     frame: Vec<(Matrix<D>, Vector<D>)>,
     /// At order 1, whether the correction subtracts the particles' linear fit (else their
     /// mean): [`crate::options::Shape::vc_linear_fit`].
@@ -558,9 +559,11 @@ impl<const D: usize> VcCorrection<D> {
         let offset = |p: usize, n: usize| -> Vector<D> {
             (grid.node_position(grid.node_multi_index(n)) - positions[p]) / h
         };
+        // With the mean fit there is no frame: its slope and offsets are zero.
+        let linear_fit = m == 1 && self.linear_fit;
         let mut frame = std::mem::take(&mut self.frame);
         frame.clear();
-        if m == 1 {
+        if linear_fit {
             frame.par_extend((0..positions.len()).into_par_iter().map(|p| {
                 let (mut weight, mut first, mut second) = (0.0, Vector::zeros(), Matrix::zeros());
                 if counted(p) {
@@ -575,12 +578,6 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 linear_frame(weight, first, second)
             }));
-        }
-        let linear_fit = m == 1 && self.linear_fit;
-        if m == 1 && !linear_fit {
-            frame
-                .iter_mut()
-                .for_each(|f| *f = (Matrix::zeros(), Vector::zeros()));
         }
         let frame_offset = |p: usize, n: usize| -> Vector<D> {
             let (t, o) = &frame[p];
@@ -618,7 +615,7 @@ impl<const D: usize> VcCorrection<D> {
                     volumes,
                     (moment, reduced, m),
                     q_of,
-                    frame_offset,
+                    linear_fit.then_some(&frame_offset),
                     counted,
                 )
             })
@@ -726,7 +723,9 @@ impl<const D: usize> VcCorrection<D> {
                     if m == 1 {
                         let z = Vector::<D>::from_fn(|k, _| z[k]);
                         *mu += w * z;
-                        *slope += w * z * frame_offset(p, s.node).transpose();
+                        if linear_fit {
+                            *slope += w * z * frame_offset(p, s.node).transpose();
+                        }
                         return;
                     }
                     q_of(p, s.node, &mut q);
@@ -777,7 +776,10 @@ impl<const D: usize> VcCorrection<D> {
                             // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                             let o = unsafe { shared.range(nodes.slot(s.node) * m * D, m * D) };
                             if m == 1 {
-                                let fitted = mu + slope * frame_offset(p, s.node);
+                                let fitted = match linear_fit {
+                                    true => mu + slope * frame_offset(p, s.node),
+                                    false => *mu,
+                                };
                                 for k in 0..D {
                                     o[k] -= v * fitted[k];
                                 }
@@ -1016,6 +1018,9 @@ impl<const D: usize> VcCorrection<D> {
         let slot = slot as usize;
         let r = &self.xi[slot * m * D..(slot + 1) * m * D];
         let (mu, slope) = &self.fit[p];
+        if m == 1 && self.frame.is_empty() {
+            return (Vector::<D>::from_fn(|k, _| r[k]) - mu) * weight.abs();
+        }
         if m == 1 {
             let (t, o) = &self.frame[p];
             let u = t * ((grid.node_position(grid.node_multi_index(n)) - x) / grid.cell_size) - o;

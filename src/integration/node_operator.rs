@@ -85,7 +85,9 @@ fn block_inverse(d: &[f64], m: usize) -> Vec<f64> {
 impl<const D: usize> NodeOperator<D> {
     /// Assembles `K` from the particles that `counted` admits, visited by the colours of `bins`
     /// (blocks of one colour write disjoint rows: the same bits with any number of threads).
-    /// `moment[slot]` is `A_I` (`m × m`), `basis(p, node, q)` writes `Q_I(x_p)`. The
+    /// `moment[slot]` is `A_I` (`m × m`), `basis(p, node, q)` writes `Q_I(x_p)`; with the
+    /// order-1 linear fit, `frame_offset(p, node)` is the node's offset `u_Ip` in the particle's
+    /// frame (`None` for the mean fit). The
     /// polynomials of degree ≥ 1 of a `reduced` node (corrected to order 1 only) are left out:
     /// their rows and columns are zero. `None` when the stencils are not a box of `w^D` nodes,
     /// or the system would hold more than `MAX_ASSEMBLED_VALUES` values.
@@ -98,7 +100,7 @@ impl<const D: usize> NodeOperator<D> {
         volumes: &[f64],
         (moment, reduced, m): (&[f64], &[bool], usize),
         basis: impl Fn(usize, usize, &mut [f64]) + Sync,
-        frame_offset: impl Fn(usize, usize) -> crate::Vector<D> + Sync,
+        frame_offset: Option<&(impl Fn(usize, usize) -> crate::Vector<D> + Sync)>,
         counted: impl Fn(usize) -> bool + Sync,
     ) -> Option<Self> {
         let len = stencils.len;
@@ -165,7 +167,7 @@ impl<const D: usize> NodeOperator<D> {
                                 row[s] = nodes.slot(ns[s]);
                                 if m > 1 {
                                     basis(p, ns[s], &mut q[s * m..(s + 1) * m]);
-                                } else {
+                                } else if let Some(frame_offset) = frame_offset {
                                     u[s] = frame_offset(p, ns[s]);
                                 }
                                 vs[s].abs()
@@ -205,6 +207,10 @@ impl<const D: usize> NodeOperator<D> {
                                     continue;
                                 }
                                 let e = (base + key[j]) as usize;
+                                if m == 1 && frame_offset.is_none() {
+                                    r[e] += ci * w[j];
+                                    continue;
+                                }
                                 if m == 1 {
                                     r[e] += ci * w[j] * (1.0 + total * u[i].dot(&u[j]));
                                     continue;
