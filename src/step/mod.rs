@@ -249,10 +249,13 @@ impl<const D: usize> Step<'_, D> {
                 b.ensure(grid, signed, true, signed || self.vc.is_some())?;
             }
         }
-        // 1. Shape functions, once per particle: B-splines as 1D factors unless VC needs the
-        //    stored lists. The nodes the last step wrote are cleared meanwhile.
-        let order = (self.shape.tensor_order())
-            .filter(|_| self.vc.is_none() && self.fast_paths.factored_stencils);
+        // 1. Shape functions, once per particle: B-splines as 1D factors (with VC, beside the
+        //    stored lists its sums read; under contact stored only). The nodes the last step
+        //    wrote are cleared meanwhile.
+        let order = (self.shape.tensor_order()).filter(|_| {
+            (self.vc.is_none() || self.options.contact.is_none())
+                && self.fast_paths.factored_stencils
+        });
         match order {
             Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
@@ -333,8 +336,21 @@ impl<const D: usize> Step<'_, D> {
             || clear_grid(nodes, bodies),
         );
         times.bins += lap(&mut clock);
-        let result = self.phases(dt, &stencils.local(), None);
+        // VC's sums and its part of the internal force read the stencils as stored lists too.
+        let mut stored = self
+            .vc
+            .is_some()
+            .then(|| std::mem::take(&mut self.work.stencils));
+        if let Some(stored) = stored.as_mut() {
+            stored.lanes = stencils.lanes;
+            stored.compute(self.shape, self.grid, &self.particles.position);
+            self.work.times.shape += lap(&mut clock);
+        }
+        let result = self.phases(dt, &stencils.local(), stored.as_ref());
         *storage(self.work) = stencils;
+        if let Some(stored) = stored {
+            self.work.stencils = stored;
+        }
         result
     }
 

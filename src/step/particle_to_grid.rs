@@ -169,7 +169,8 @@ where
                     }
                 }
             };
-            // A factored scatter when the stencils have one (B-spline factors; no VC).
+            // A factored scatter when the stencils have one (B-spline factors), then VC's
+            // correction of the internal force from the stored stencils.
             let input = ScatterInput {
                 position: xp,
                 mass: m,
@@ -182,7 +183,11 @@ where
                 with_gradient,
             };
             // SAFETY: as above.
-            if vc.is_none() && unsafe { stencils.scatter(p, &input, &out) } {
+            if unsafe { stencils.scatter(p, &input, &out) } {
+                if let (Some(vc), Some((vs, _)), Some(stored)) = (vc, force, shape) {
+                    // SAFETY: as above (the same stencil's nodes).
+                    unsafe { scatter_vc_correction(grid, vc, stored, p, &xp, vs, &out) };
+                }
                 return;
             }
             stencils.for_each_with_offset(grid, p, c.is_some().then_some(&xp), node_sums);
@@ -210,4 +215,30 @@ where
     );
     bins.collect_active(grid, nodes);
     largest_mass
+}
+
+/// VC's part of particle `p`'s internal force, `f_I += −V_p σ_p (∇̂Ψ_I − ∇Ψ_I)` (`vs` is
+/// `−V_p σ_p`), at the nodes of its stored stencil where `Ψ_I(x_p) ≠ 0`, for a map whose
+/// factored scatter added the rest.
+///
+/// # Safety
+/// As [`StencilView::scatter`]: no other thread writes these nodes meanwhile.
+#[inline(always)]
+unsafe fn scatter_vc_correction<const D: usize>(
+    grid: &Grid<D>,
+    vc: &VcCorrection<D>,
+    stored: &Stencils<D>,
+    p: usize,
+    xp: &Vector<D>,
+    vs: Matrix<D>,
+    out: &NodeScatter<D>,
+) {
+    let (nodes, values, _) = stored.of(p);
+    for (&n, &w) in nodes.iter().zip(values) {
+        if w != 0.0 {
+            let correction = vc.gradient_correction_at(grid, out.slot[n], n, p, xp, w);
+            // SAFETY: the caller's.
+            unsafe { scatter_add(out.force, n, vs * correction) };
+        }
+    }
 }

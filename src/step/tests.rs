@@ -983,18 +983,24 @@ fn rk2_lumping_at_the_edge_of_a_body() {
 /// give the particle data of the stencils stored node by node to round-off: after 8 steps the
 /// kinematic fields agree to 1e-12 of their largest value (measured: below 1e-14) and the stresses
 /// to 1e-14 E (measured 2e-16 E), for APIC, FLIP and MLS (MLS with USL and MUSL: the stored
-/// path folds the force node by node, the factored one row by row), 2D and 3D.
+/// path folds the force node by node, the factored one row by row), 2D and 3D; and with VC
+/// (of order 1 and 2 on the B-splines, APIC and MUSL with FLIP), where the factored map adds
+/// VC's part of the internal force from the stored lists after the rest.
 #[test]
 fn factored_and_stored_stencils_agree_to_round_off() {
     fn run<const D: usize>(
         shape: Shape,
-        transfer: Transfer,
-        musl: bool,
+        (transfer, musl): (Transfer, bool),
+        vc: Option<u32>,
         stored: bool,
     ) -> Particles<D> {
         let mut sim = block::<D>(shape, transfer);
         if musl {
             sim.set_scheme(Scheme::Musl).unwrap();
+        }
+        if let Some(order) = vc {
+            sim.set_integration(crate::sim::Integration::Vc { order })
+                .unwrap();
         }
         sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
         sim.set_fast_paths(FastPaths {
@@ -1050,17 +1056,35 @@ fn factored_and_stored_stencils_agree_to_round_off() {
                 continue; // refused (tested above)
             }
             let what = format!("{shape:?} {transfer:?} musl {musl}");
+            let scheme = (transfer, musl);
             close(
-                &run::<2>(shape, transfer, musl, false),
-                &run::<2>(shape, transfer, musl, true),
+                &run::<2>(shape, scheme, None, false),
+                &run::<2>(shape, scheme, None, true),
                 &format!("{what} 2D"),
             );
             close(
-                &run::<3>(shape, transfer, musl, false),
-                &run::<3>(shape, transfer, musl, true),
+                &run::<3>(shape, scheme, None, false),
+                &run::<3>(shape, scheme, None, true),
                 &format!("{what} 3D"),
             );
         }
+    }
+    for (shape, order, scheme) in [
+        (Shape::BSpline2, 1, (Transfer::Apic, false)),
+        (Shape::BSpline2, 1, (Transfer::PicFlip { flip: 0.95 }, true)),
+        (Shape::BSpline3, 2, (Transfer::Apic, false)),
+    ] {
+        let what = format!("{shape:?} VC{order} {scheme:?}");
+        close(
+            &run::<2>(shape, scheme, Some(order), false),
+            &run::<2>(shape, scheme, Some(order), true),
+            &format!("{what} 2D"),
+        );
+        close(
+            &run::<3>(shape, scheme, Some(order), false),
+            &run::<3>(shape, scheme, Some(order), true),
+            &format!("{what} 3D"),
+        );
     }
 }
 
