@@ -1218,6 +1218,10 @@ impl<'a, const D: usize> NullSpace<'a, D> {
     /// parallel.
     fn project(&self, v: &mut [f64], coefficients: bool) {
         let (m, k) = (self.exps.len(), self.nulls.len());
+        if (m, k) == (1, 1) {
+            self.project_constants(v, coefficients);
+            return;
+        }
         let bodies = self.gram_inverse.len();
         // Per body, `Σ_J N_Jᵀ (a_J) v_J`, `k × D` row-major.
         let mut t = vec![0.0; bodies * k * D];
@@ -1257,6 +1261,44 @@ impl<'a, const D: usize> NullSpace<'a, D> {
                             false => self.weight_of(slot) * sum,
                         };
                     }
+                }
+            });
+    }
+}
+
+impl<const D: usize> NullSpace<'_, D> {
+    /// [`NullSpace::project`] at order 1 with the mean fit, where the null space is each body's
+    /// constant (`m = k = 1`): the same sums in the same order, without the general loops.
+    fn project_constants(&self, v: &mut [f64], coefficients: bool) {
+        let mut t = vec![[0.0; D]; self.gram_inverse.len()];
+        for (slot, &b) in self.body_of.iter().enumerate() {
+            if self.used[slot] {
+                let n = self.table[slot];
+                let weight = if coefficients {
+                    self.weight_of(slot)
+                } else {
+                    1.0
+                };
+                for c in 0..D {
+                    t[b][c] += weight * (n * v[slot * D + c]);
+                }
+            }
+        }
+        let alpha: Vec<[f64; D]> = (self.gram_inverse.iter().zip(&t))
+            .map(|(g, t)| t.map(|t| g[(0, 0)] * t))
+            .collect();
+        v.par_chunks_exact_mut(D)
+            .enumerate()
+            .filter(|&(slot, _)| self.used[slot])
+            .for_each(|(slot, r)| {
+                let (n, alpha) = (self.table[slot], &alpha[self.body_of[slot]]);
+                let weight = if coefficients {
+                    1.0
+                } else {
+                    self.weight_of(slot)
+                };
+                for c in 0..D {
+                    r[c] -= weight * (n * alpha[c]);
                 }
             });
     }

@@ -179,7 +179,27 @@ impl<const D: usize> NodeOperator<D> {
                         if total == 0.0 {
                             continue;
                         }
-                        if (0..len).all(|s| ns[s] == ns[0] + box_step[s]) {
+                        let in_box = (0..len).all(|s| ns[s] == ns[0] + box_step[s]);
+                        let c = volumes[p] / total;
+                        if in_box && m == 1 && frame_offset.is_none() {
+                            // The mean fit on a box: each row takes the particle's weights as
+                            // runs along axis 0, `r_I[J − I] += c w_I w_J` (a weight of zero
+                            // adds +0, which leaves every sum as it is).
+                            for i in (0..len).filter(|&i| w[i] != 0.0) {
+                                let ci = c * w[i];
+                                // SAFETY: as below.
+                                let r = unsafe { rows.range(row[i] * block, block) };
+                                let base = (centre as isize - box_key[i]) as usize;
+                                for (run, wj) in w.chunks_exact(width).enumerate() {
+                                    let e = base + box_key[run * width] as usize;
+                                    for (r, &wj) in r[e..e + width].iter_mut().zip(wj) {
+                                        *r += ci * wj;
+                                    }
+                                }
+                            }
+                            continue;
+                        }
+                        if in_box {
                             key.copy_from_slice(&box_key);
                         } else {
                             let first = grid.node_multi_index(ns[0]);
@@ -192,7 +212,6 @@ impl<const D: usize> NodeOperator<D> {
                                     .sum();
                             }
                         }
-                        let c = volumes[p] / total;
                         for i in 0..len {
                             if w[i] == 0.0 {
                                 continue;
