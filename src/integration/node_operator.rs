@@ -717,8 +717,16 @@ impl<const D: usize> NodeOperator<D> {
             }
         });
         let at = |i: usize, a: usize| (self.index[i][a] - lattice.lowest[a]) as usize;
-        let mut numbers = std::collections::HashMap::<[i64; D], u32>::new();
-        let mut kinds = std::collections::HashMap::<[u64; D], u16>::new();
+        // The aggregates numbered in the order their first rows come, through a table over
+        // the box of aggregates (`place`); the offsets' kinds (a few) by search.
+        let counts: [usize; D] = std::array::from_fn(|a| axes[a].centre.len());
+        let place = |key: &[i64; D]| -> usize {
+            (0..D)
+                .rev()
+                .fold(0, |n, a| n * counts[a] + (key[a] - axes[a].lowest) as usize)
+        };
+        let mut numbers = vec![u32::MAX; counts.iter().product()];
+        let mut kinds = Vec::<[u64; D]>::new();
         let mut index = Vec::new();
         let mut prolongation = Vec::new();
         let mut child = vec![0u16; rows];
@@ -730,16 +738,40 @@ impl<const D: usize> NodeOperator<D> {
                 let key: [i64; D] =
                     std::array::from_fn(|a| axes[a].lowest + axes[a].aggregate[at(i, a)] as i64);
                 let offset: [f64; D] = std::array::from_fn(|a| axes[a].offset[at(i, a)]);
-                child[i] = *kinds.entry(offset.map(f64::to_bits)).or_insert_with(|| {
-                    prolongation.push(re_expansion(exponents, offset, 0.5));
-                    prolongation.len() as u16 - 1
-                });
-                *numbers.entry(key).or_insert_with(|| {
+                let bits = offset.map(f64::to_bits);
+                child[i] = match kinds.iter().position(|k| *k == bits) {
+                    Some(kind) => kind as u16,
+                    None => {
+                        kinds.push(bits);
+                        prolongation.push(re_expansion(exponents, offset, 0.5));
+                        prolongation.len() as u16 - 1
+                    }
+                };
+                let number = &mut numbers[place(&key)];
+                if *number == u32::MAX {
                     index.push(key);
-                    index.len() as u32 - 1
-                })
+                    *number = index.len() as u32 - 1;
+                }
+                *number
             })
             .collect();
+        // Each aggregate's rows in row order (a counting sort), so that its coarse row can be
+        // summed on its own in the order of the rows.
+        let coarse = index.len();
+        let mut first = vec![0usize; coarse + 1];
+        for &a in parent.iter().filter(|&&a| a != u32::MAX) {
+            first[a as usize + 1] += 1;
+        }
+        for a in 0..coarse {
+            first[a + 1] += first[a];
+        }
+        let mut children = vec![0usize; first[coarse]];
+        let mut next = first.clone();
+        for (i, &a) in parent.iter().enumerate().filter(|(_, &a)| a != u32::MAX) {
+            children[next[a as usize]] = i;
+            next[a as usize] += 1;
+        }
+        let children_of = |a: usize| &children[first[a]..first[a + 1]];
         let aggregation = Aggregation {
             parent,
             child,
@@ -757,51 +789,54 @@ impl<const D: usize> NodeOperator<D> {
             })
             .max()
             .unwrap_or(0);
-        let coarse = index.len();
         let span = 2 * radius + 1;
         let block = span.pow(D as u32);
         let centre = (block - 1) / 2;
+        // Per aggregate `a`, `Σ_{i in a} Σ_j P_iᵀ K_ij P_j` over its rows in row order (the
+        // same sums whatever the threads).
         let mut dense = vec![0.0; coarse * block * mcc];
-        let mut vp = vec![0.0; m * mc];
-        for i in 0..rows {
-            let a = parent[i];
-            if a == u32::MAX {
-                continue;
-            }
-            let start = i * self.block;
-            let n = self.count[i] as usize;
-            let ia = index[a as usize];
-            for e in 0..n {
-                let j = self.column[start + e] as usize;
-                let b = parent[j];
-                if b == u32::MAX {
-                    continue;
-                }
-                let ib = index[b as usize];
-                let key: usize = (0..D)
-                    .map(|k| (ib[k] - ia[k] + radius as i64) as usize * span.pow(k as u32))
-                    .sum();
-                let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
-                let out = &mut dense[(a as usize * block + key) * mcc..][..mcc];
-                if mc == 1 {
-                    out[0] += v[0];
-                    continue;
-                }
-                // P_iᵀ V P_j.
-                let (pi, pj) = (child(i), child(j));
-                for r in 0..m {
-                    for g in 0..mc {
-                        vp[r * mc + g] = (0..m).map(|h| v[r * m + h] * pj[h * mc + g]).sum();
+        dense
+            .par_chunks_mut(block * mcc)
+            .enumerate()
+            .for_each(|(a, row)| {
+                let mut vp = vec![0.0; m * mc];
+                let ia = index[a];
+                for &i in children_of(a) {
+                    let start = i * self.block;
+                    let n = self.count[i] as usize;
+                    for e in 0..n {
+                        let j = self.column[start + e] as usize;
+                        let b = parent[j];
+                        if b == u32::MAX {
+                            continue;
+                        }
+                        let ib = index[b as usize];
+                        let key: usize = (0..D)
+                            .map(|k| (ib[k] - ia[k] + radius as i64) as usize * span.pow(k as u32))
+                            .sum();
+                        let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
+                        let out = &mut row[key * mcc..][..mcc];
+                        if mc == 1 {
+                            out[0] += v[0];
+                            continue;
+                        }
+                        // P_iᵀ V P_j.
+                        let (pi, pj) = (child(i), child(j));
+                        for r in 0..m {
+                            for g in 0..mc {
+                                vp[r * mc + g] =
+                                    (0..m).map(|h| v[r * m + h] * pj[h * mc + g]).sum();
+                            }
+                        }
+                        for f in 0..mc {
+                            for g in 0..mc {
+                                out[f * mc + g] +=
+                                    (0..m).map(|r| pi[r * mc + f] * vp[r * mc + g]).sum::<f64>();
+                            }
+                        }
                     }
                 }
-                for f in 0..mc {
-                    for g in 0..mc {
-                        out[f * mc + g] +=
-                            (0..m).map(|r| pi[r * mc + f] * vp[r * mc + g]).sum::<f64>();
-                    }
-                }
-            }
-        }
+            });
         let mut count = vec![0u32; coarse];
         let mut column = vec![0u32; coarse * block];
         let mut value = vec![0.0; coarse * block * mcc];
@@ -810,20 +845,25 @@ impl<const D: usize> NodeOperator<D> {
                 std::array::from_fn(|k| ((e / span.pow(k as u32)) % span) as i64 - radius as i64)
             })
             .collect();
-        for a in 0..coarse {
-            let mut k = 0;
-            for e in 0..block {
-                let v = &dense[(a * block + e) * mcc..(a * block + e + 1) * mcc];
-                if e != centre && v.iter().all(|&x| x == 0.0) {
-                    continue;
+        count
+            .par_iter_mut()
+            .zip(column.par_chunks_mut(block))
+            .zip(value.par_chunks_mut(block * mcc))
+            .enumerate()
+            .for_each(|(a, ((count, column), value))| {
+                let mut k = 0;
+                for e in 0..block {
+                    let v = &dense[(a * block + e) * mcc..(a * block + e + 1) * mcc];
+                    if e != centre && v.iter().all(|&x| x == 0.0) {
+                        continue;
+                    }
+                    let at: [i64; D] = std::array::from_fn(|c| index[a][c] + steps[e][c]);
+                    column[k] = numbers[place(&at)];
+                    value[k * mcc..(k + 1) * mcc].copy_from_slice(v);
+                    k += 1;
                 }
-                let at: [i64; D] = std::array::from_fn(|c| index[a][c] + steps[e][c]);
-                column[a * block + k] = numbers[&at];
-                value[(a * block + k) * mcc..(a * block + k + 1) * mcc].copy_from_slice(v);
-                k += 1;
-            }
-            count[a] = k as u32;
-        }
+                *count = k as u32;
+            });
         let diagonal = (0..coarse)
             .flat_map(|a| {
                 dense[(a * block + centre) * mcc..(a * block + centre + 1) * mcc].to_vec()
@@ -831,20 +871,21 @@ impl<const D: usize> NodeOperator<D> {
             .collect();
         // Σ_i P_iᵀ A_i P_i over each aggregate: block diagonal, as every node has one parent.
         let mut moment = vec![0.0; if mc > 1 { coarse * mcc } else { 0 }];
-        for i in (0..rows).filter(|&i| mc > 1 && parent[i] != u32::MAX) {
-            let (p, a) = (child(i), &self.moment[i * mm..(i + 1) * mm]);
-            let out = &mut moment[parent[i] as usize * mcc..][..mcc];
-            for f in 0..mc {
-                for g in 0..mc {
-                    out[f * mc + g] += (0..m)
-                        .map(|r| {
-                            p[r * mc + f]
-                                * (0..m).map(|h| a[r * m + h] * p[h * mc + g]).sum::<f64>()
-                        })
-                        .sum::<f64>();
+        moment.par_chunks_mut(mcc).enumerate().for_each(|(c, out)| {
+            for &i in children_of(c) {
+                let (p, a) = (child(i), &self.moment[i * mm..(i + 1) * mm]);
+                for f in 0..mc {
+                    for g in 0..mc {
+                        out[f * mc + g] += (0..m)
+                            .map(|r| {
+                                p[r * mc + f]
+                                    * (0..m).map(|h| a[r * m + h] * p[h * mc + g]).sum::<f64>()
+                            })
+                            .sum::<f64>();
+                    }
                 }
             }
-        }
+        });
         let coarse_lattice = Lattice {
             lowest: std::array::from_fn(|a| axes[a].lowest),
             position: std::array::from_fn(|a| axes[a].centre.clone()),
