@@ -37,7 +37,7 @@
 //! `⟨ζ, Kζ⟩ = Σ_p V_p Σ_I w_Ip (ζ_I·Q_I − fit_p)²`), solved by conjugate gradients
 //! preconditioned with the node blocks `A_I`, whose first iterate is the per-node correction;
 //! the iterations grow with the grid's width. `K` is assembled on the nodes once per step, and
-//! on wide grids (order 1: at least 48 nodes wide; order ≥ 2: whenever the hierarchy has a
+//! on wide grids (order 1: at least 20 nodes wide; order ≥ 2: whenever the hierarchy has a
 //! level below the nodes) preconditioned by an aggregation multigrid V-cycle instead
 //! (`node_operator`): about a dozen iterations whatever the grid with the mean fit, 40–110
 //! with the linear fit (80 to 160 cells), about 20–50 at order 2, where round-off lets

@@ -485,8 +485,12 @@ const COARSE_WEIGHT: f64 = 1.8;
 const COARSE_WEIGHT_HIGHER: f64 = 1.4;
 
 /// At order 1 the V-cycle is used when the fine level has at least this many rows per axis
-/// (`rows^(1/D)`), see [`Multilevel::pays`].
-const MULTILEVEL_WIDTH: f64 = 48.0;
+/// (`rows^(1/D)`), see [`Multilevel::pays`]. One thread, `throughput --method bspline2 --vc`,
+/// ms a step with the node blocks against the V-cycle: 3D 10^5 particles (26 rows across) 457
+/// against 392, 2D 6 400 (about 42) 15.2–16.4 against 7.6–9.4, 2D 2 500 (about 28) 4.6–5.1
+/// against 3.3–3.4; from 12 rows the V-cycle was slower (3D 10 648 particles, 40 against 48; 2D
+/// 1 024, 1.7–2.4 against 2.9–4.0).
+const MULTILEVEL_WIDTH: f64 = 20.0;
 
 /// Rows whose diagonal is below this fraction of the largest (nodes that particles barely reach)
 /// are preconditioned by their diagonal alone, outside the V-cycle.
@@ -1119,7 +1123,7 @@ impl<const D: usize> Multilevel<D> {
     /// alone the iterations grow with the width of the nodes (about 3 per node across: 457 at
     /// 161 nodes across in 2D, 82 at 26 in 3D, on the throughput example's blocks), while a
     /// V-cycle costs about six products with `K` and takes about a dozen iterations
-    /// (`COARSE_WEIGHT`). At order ≥ 2 the node blocks take about 8 per node across (63 at 13,
+    /// (`COARSE_WEIGHT`): from about 20 nodes across it pays (`MULTILEVEL_WIDTH`). At order ≥ 2 the node blocks take about 8 per node across (63 at 13,
     /// 174 at 21: RK of order 2 on the manufactured solution's box) and the V-cycle about 20,
     /// so it is used whenever the hierarchy has a level below the nodes (on a single level the
     /// coarsest pseudo-inverse, whose norm measures nothing of its dropped directions, stopped
