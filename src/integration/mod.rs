@@ -1309,9 +1309,8 @@ impl<const D: usize> NullSpace<'_, D> {
 pub(crate) fn bodies(
     slots: usize,
     particles: usize,
-    stencil: impl Fn(usize, &mut dyn FnMut(usize)),
+    stencil: impl Fn(usize, &mut dyn FnMut(usize)) + Sync,
 ) -> Vec<usize> {
-    let mut parent: Vec<usize> = (0..slots).collect();
     fn root(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
             parent[i] = parent[parent[i]];
@@ -1319,17 +1318,36 @@ pub(crate) fn bodies(
         }
         i
     }
-    for p in 0..particles {
-        let mut first = None;
-        stencil(p, &mut |slot| match first {
-            None => first = Some(root(&mut parent, slot)),
-            Some(f) => {
-                let r = root(&mut parent, slot);
-                if r != f {
-                    parent[r] = f;
-                }
+    fn join(parent: &mut [usize], a: usize, b: usize) {
+        let (a, b) = (root(parent, a), root(parent, b));
+        if a != b {
+            parent[b] = a;
+        }
+    }
+    // One forest per thread over its share of the particles, then merged: the components, and
+    // so the numbering below (by each body's first slot), are the same for any split.
+    let chunks = rayon::current_num_threads().clamp(1, particles.max(1));
+    let per = particles.div_ceil(chunks);
+    let mut forests = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut parent: Vec<usize> = (0..slots).collect();
+            for p in c * per..((c + 1) * per).min(particles) {
+                let mut first = None;
+                stencil(p, &mut |slot| match first {
+                    None => first = Some(slot),
+                    Some(f) => join(&mut parent, f, slot),
+                });
             }
-        });
+            parent
+        })
+        .collect::<Vec<_>>()
+        .into_iter();
+    let mut parent = forests.next().unwrap_or_else(|| (0..slots).collect());
+    for other in forests {
+        for (i, &j) in other.iter().enumerate().filter(|&(i, &j)| i != j) {
+            join(&mut parent, i, j);
+        }
     }
     let mut number = vec![usize::MAX; slots];
     let mut next = 0;

@@ -566,3 +566,27 @@ fn boundary_points_follow_an_affine_motion_exactly() {
         assert!((b.area_normal[k] - nanson).norm() < 1e-15, "n a of {k}");
     }
 }
+
+/// The bodies of the slots that particles join are the connected components, numbered by their
+/// first slot, whatever the number of threads (each thread's forest is merged): slots 0–9,
+/// particles joining (0, 3), (3, 7), (1, 2), (8, 9), (2, 8) and one alone at 5; slots 4 and 6
+/// are joined by none.
+#[test]
+fn bodies_are_the_components_on_any_number_of_threads() {
+    let joins: [&[usize]; 6] = [&[0, 3], &[3, 7], &[1, 2], &[8, 9], &[2, 8], &[5]];
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            bodies(10, joins.len(), |p, visit: &mut dyn FnMut(usize)| {
+                joins[p].iter().for_each(|&s| visit(s))
+            })
+        })
+    };
+    let expected = vec![0, 1, 1, 0, 2, 3, 4, 0, 1, 1];
+    for threads in [1, 2, 3, 6] {
+        assert_eq!(run(threads), expected, "{threads} threads");
+    }
+}

@@ -43,7 +43,7 @@ pub(super) fn remove_vc_torque<const D: usize>(
     walls: &Walls<D>,
     stencils: &Stencils<D>,
     particles: usize,
-    in_field: impl Fn(usize) -> bool,
+    in_field: impl Fn(usize) -> bool + Sync,
     nodes: &mut GridNodes<D>,
 ) {
     // The fraction of a node's force the grid update applies where it drops the rest.
