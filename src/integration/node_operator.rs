@@ -645,6 +645,9 @@ struct AxisAggregates {
 /// without particles, which takes no part) and `P`'s block.
 struct Aggregation {
     parent: Vec<u32>,
+    /// Each aggregate's rows in row order: `children[first[a]..first[a + 1]]`.
+    first: Vec<usize>,
+    children: Vec<usize>,
     /// Per row: which of `prolongation`'s blocks is its.
     child: Vec<u16>,
     /// Per offset of a row from its aggregate's centre, `P`'s `mc × mc` block: row `e` a
@@ -655,6 +658,11 @@ struct Aggregation {
 impl Aggregation {
     fn block(&self, row: usize) -> &[f64] {
         &self.prolongation[self.child[row] as usize]
+    }
+
+    /// The rows of aggregate `a`, in row order.
+    fn children(&self, a: usize) -> &[usize] {
+        &self.children[self.first[a]..self.first[a + 1]]
     }
 }
 
@@ -775,12 +783,15 @@ impl<const D: usize> NodeOperator<D> {
             children[next[a as usize]] = i;
             next[a as usize] += 1;
         }
-        let children_of = |a: usize| &children[first[a]..first[a + 1]];
+
         let aggregation = Aggregation {
             parent,
+            first,
+            children,
             child,
             prolongation,
         };
+        let children_of = |a: usize| aggregation.children(a);
         let parent = &aggregation.parent;
         let child = |i: usize| -> &[f64] { aggregation.block(i) };
         // How far the aggregates of rows `radius` apart can be.
@@ -1199,26 +1210,27 @@ impl<const D: usize> Multilevel<D> {
         let pc = mc * D;
         let mut rc = vec![0.0; coarse * pc];
         let child = |i: usize| -> &[f64] { aggregation.block(i) };
-        for (i, &a) in parent.iter().enumerate() {
-            if a == u32::MAX {
-                continue;
-            }
-            let a = a as usize;
-            if mc == 1 {
+        // Each coarse row sums its own rows in row order (the same bits on any threads).
+        rc.par_chunks_exact_mut(pc).enumerate().for_each(|(a, rc)| {
+            for &i in aggregation.children(a) {
+                if mc == 1 {
+                    for k in 0..D {
+                        rc[k] += r[i * D + k] - kx[i * D + k];
+                    }
+                    continue;
+                }
+                let p = child(i);
                 for k in 0..D {
-                    rc[a * D + k] += r[i * D + k] - kx[i * D + k];
-                }
-                continue;
-            }
-            let p = child(i);
-            for k in 0..D {
-                for f in 0..mc {
-                    rc[a * pc + k * mc + f] += (0..m)
-                        .map(|e| p[e * mc + f] * (r[i * per + k * m + e] - kx[i * per + k * m + e]))
-                        .sum::<f64>();
+                    for f in 0..mc {
+                        rc[k * mc + f] += (0..m)
+                            .map(|e| {
+                                p[e * mc + f] * (r[i * per + k * m + e] - kx[i * per + k * m + e])
+                            })
+                            .sum::<f64>();
+                    }
                 }
             }
-        }
+        });
         let mut xc = vec![0.0; coarse * pc];
         self.cycle(l + 1, &rc, &mut xc);
         let reduced = if l == 0 { &self.reduced[..] } else { &[] };
