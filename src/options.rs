@@ -375,9 +375,9 @@ pub struct FastPaths {
     /// The particle loops compiled for AVX2 and FMA where the processor has them (and
     /// `RKMPM_PORTABLE=1` is not set).
     pub vector_instructions: bool,
-    /// B-spline stencils stored as 1D factors per axis, rather than node by node as RK's (with
-    /// VC, the transfers take the factors and VC's sums the lists; under contact with VC, the
-    /// lists only).
+    /// B-spline stencils (and RK1's with ã = 2, the cubic B-spline's) stored as 1D factors per
+    /// axis, rather than node by node as RK's (with VC, the transfers take the factors and VC's
+    /// sums the lists).
     pub factored_stencils: bool,
     /// The particles' storage kept in the order of their grid blocks (`Particles`); off, it
     /// stays in id order and scenes whose particles mix run slower.

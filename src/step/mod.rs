@@ -249,13 +249,10 @@ impl<const D: usize> Step<'_, D> {
                 b.ensure(grid, signed, true, signed || self.vc.is_some())?;
             }
         }
-        // 1. Shape functions, once per particle: B-splines as 1D factors (with VC, beside the
-        //    stored lists its sums read; under contact stored only). The nodes the last step
-        //    wrote are cleared meanwhile.
-        let order = (self.shape.tensor_order()).filter(|_| {
-            (self.vc.is_none() || self.options.contact.is_none())
-                && self.fast_paths.factored_stencils
-        });
+        // 1. Shape functions, once per particle: B-splines (and RK1 with ã = 2) as 1D factors,
+        //    with VC beside the stored lists its sums read. The nodes the last step wrote are
+        //    cleared meanwhile.
+        let order = (self.shape.tensor_order()).filter(|_| self.fast_paths.factored_stencils);
         match order {
             Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
             Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
