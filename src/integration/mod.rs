@@ -1264,9 +1264,7 @@ impl<'a, const D: usize> NullSpace<'a, D> {
                 }
             });
     }
-}
 
-impl<const D: usize> NullSpace<'_, D> {
     /// [`NullSpace::project`] at order 1 with the mean fit, where the null space is each body's
     /// constant (`m = k = 1`): the same sums in the same order, without the general loops.
     fn project_constants(&self, v: &mut [f64], coefficients: bool) {
