@@ -82,6 +82,7 @@
 //! section 3). The correction itself stays of `∇Ψ`, weighted by `|Ψ|`.
 
 pub mod boundary_points;
+mod lattice_rows;
 mod node_operator;
 
 pub use boundary_points::BoundaryPoints;
@@ -91,7 +92,7 @@ use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, Stencils};
 use crate::{Matrix, Vector};
 use nalgebra::{DMatrix, DVector};
-use node_operator::{Multilevel, NodeOperator};
+use node_operator::{Multilevel, NodeOperator, OperatorStorage};
 use rayon::prelude::*;
 
 /// A node's order-`n` correction needs its particle moment matrix `A_I = Σ V_p Q Qᵀ` to be well
@@ -270,6 +271,8 @@ pub struct VcCorrection<const D: usize> {
     /// Per particle with the order-1 linear fit: its frame `(T_p, o_p)`, see [`linear_frame`]
     /// (empty with the mean fit).
     frame: Vec<(Matrix<D>, Vector<D>)>,
+    /// The last step's storage of the assembled `K`, reused (its pages already mapped).
+    storage: OperatorStorage,
     /// At order 1, whether the correction subtracts the particles' linear fit (else their
     /// mean): [`crate::options::Shape::vc_linear_fit`].
     pub linear_fit: bool,
@@ -306,6 +309,7 @@ impl<const D: usize> VcCorrection<D> {
             edge: Vec::new(),
             fit: Vec::new(),
             frame: Vec::new(),
+            storage: OperatorStorage::default(),
             linear_fit: false,
             solve: VcSolve::default(),
             iterations: 0,
@@ -617,6 +621,7 @@ impl<const D: usize> VcCorrection<D> {
                     q_of,
                     linear_fit.then_some(&frame_offset),
                     counted,
+                    std::mem::take(&mut self.storage),
                 )
             })
             .flatten()
@@ -973,6 +978,9 @@ impl<const D: usize> VcCorrection<D> {
         self.frame = frame;
         self.edge = edge;
         self.xi = zeta;
+        if let Some(multilevel) = multilevel {
+            self.storage = multilevel.into_storage();
+        }
     }
 
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.

@@ -16,6 +16,8 @@
 //! node, `w` nodes per axis of a stencil. [`Multilevel`] preconditions it, so that the
 //! iterations stop growing with the grid's width.
 
+use super::lattice_rows::LatticeRows;
+use crate::cpu::Lanes;
 use crate::grid::{Bins, Grid, GridNodes, SharedSlice};
 use crate::shape::Stencils;
 use nalgebra::DMatrix;
@@ -25,6 +27,16 @@ use rayon::prelude::*;
 /// while it is assembled); larger ones (RK of order 2 in 3D on wide grids, whose `6^3`-node
 /// stencils give rows of `11^3` blocks of `4 × 4`) are applied matrix-free.
 const MAX_ASSEMBLED_VALUES: usize = 1 << 26;
+
+/// The buffers of an assembled `K` (its packed rows and their lattice layout), handed from
+/// one step's operator to the next so that their pages are mapped once (a fresh allocation of
+/// tens of MB a step faults every page in again: a tenth of a 3D VC step).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct OperatorStorage {
+    value: Vec<f64>,
+    column: Vec<u32>,
+    laid: Vec<f64>,
+}
 
 /// `K` on the active nodes (slots): per slot a row of at most `(2w − 1)^D` blocks of `m × m`
 /// values, packed at the front of its room of that many blocks.
@@ -52,6 +64,11 @@ pub(crate) struct NodeOperator<const D: usize> {
     /// Per row room: the column slots, then the blocks.
     column: Vec<u32>,
     value: Vec<f64>,
+    /// At order 1, the rows on their lattice box too, which [`NodeOperator::apply`] then
+    /// takes (see [`LatticeRows`]).
+    lattice: Option<LatticeRows>,
+    /// A buffer for the lattice layout's values.
+    spare: Vec<f64>,
 }
 
 /// The inverse that a row's smoothing step applies: of its moment block `d` (`m × m`), or,
@@ -102,6 +119,7 @@ impl<const D: usize> NodeOperator<D> {
         basis: impl Fn(usize, usize, &mut [f64]) + Sync,
         frame_offset: Option<&(impl Fn(usize, usize) -> crate::Vector<D> + Sync)>,
         counted: impl Fn(usize) -> bool + Sync,
+        storage: OperatorStorage,
     ) -> Option<Self> {
         let len = stencils.len;
         let width = (1..=len).find(|w| w.pow(D as u32) >= len)?;
@@ -145,7 +163,13 @@ impl<const D: usize> NodeOperator<D> {
             })
             .collect();
         // B, dense per row room.
-        let mut dense = vec![0.0; slots * block * mm];
+        let OperatorStorage {
+            value: mut dense,
+            mut column,
+            laid,
+        } = storage;
+        dense.clear();
+        dense.resize(slots * block * mm, 0.0);
         {
             let rows = SharedSlice::new(&mut dense);
             for colour in &bins.colours {
@@ -252,7 +276,8 @@ impl<const D: usize> NodeOperator<D> {
         // K = diag(A) − B, packed in place (entry `k` of a row from its block entry `e ≥ k`);
         // a reduced node's rows and columns of degree ≥ 1 zero.
         let mut count = vec![0u32; slots];
-        let mut column = vec![0u32; slots * block];
+        column.clear();
+        column.resize(slots * block, 0);
         let mut value = dense;
         count
             .par_iter_mut()
@@ -311,13 +336,15 @@ impl<const D: usize> NodeOperator<D> {
         } else {
             Vec::new()
         };
-        Some(NodeOperator::new(
+        let mut operator = NodeOperator::new(
             index,
             (m, diagonal, moment),
             width - 1,
             block,
             (count, column, value),
-        ))
+        );
+        operator.spare = laid;
+        Some(operator)
     }
 
     fn new(
@@ -346,6 +373,23 @@ impl<const D: usize> NodeOperator<D> {
             count,
             column,
             value,
+            lattice: None,
+            spare: Vec::new(),
+        }
+    }
+
+    /// Lays the rows out on their lattice box for the products, at order 1 where they fill
+    /// enough of it ([`LatticeRows::new`]); the packed rows stay for the coarse levels' sums.
+    fn lay_out(&mut self) {
+        if self.m == 1 {
+            self.lattice = LatticeRows::new(
+                &self.index,
+                self.radius,
+                self.block,
+                (&self.count, &self.column, &self.value),
+                Lanes::detect(),
+                std::mem::take(&mut self.spare),
+            );
         }
     }
 
@@ -388,6 +432,9 @@ impl<const D: usize> NodeOperator<D> {
 
     /// `out = K ζ` for `D` directions stored per slot (`ζ[(slot * D + k) * m + j]`).
     pub fn apply(&self, zeta: &[f64], out: &mut [f64]) {
+        if let Some(lattice) = &self.lattice {
+            return lattice.apply::<D>(zeta, out);
+        }
         let (m, mm) = (self.m, self.m * self.m);
         let per = m * D;
         out.par_chunks_exact_mut(per)
@@ -982,6 +1029,7 @@ impl<const D: usize> Multilevel<D> {
         reach: Option<&[f64]>,
     ) -> Self {
         if !cycle {
+            fine.lay_out();
             return Multilevel {
                 weak: Vec::new(),
                 reduced: Vec::new(),
@@ -1108,6 +1156,7 @@ impl<const D: usize> Multilevel<D> {
             });
             &eig.eigenvectors * DMatrix::from_diagonal(&inverse) * eig.eigenvectors.transpose()
         });
+        levels.iter_mut().for_each(NodeOperator::lay_out);
         Multilevel {
             weak,
             reduced: reduced.to_vec(),
@@ -1117,6 +1166,16 @@ impl<const D: usize> Multilevel<D> {
             body,
             bodies,
             pseudo_inverse,
+        }
+    }
+
+    /// The fine level's buffers, for the next step's [`NodeOperator::assemble`].
+    pub fn into_storage(mut self) -> OperatorStorage {
+        let fine = self.levels.swap_remove(0);
+        OperatorStorage {
+            value: fine.value,
+            column: fine.column,
+            laid: fine.lattice.map_or(fine.spare, LatticeRows::into_values),
         }
     }
 
