@@ -10,6 +10,7 @@
 //! entries a packed row leaves out are zero here and add `+0`, which leaves a sum as it is, so
 //! the products are the same bits as the packed rows' (`lattice_products_are_the_packed_ones`).
 
+use super::node_operator::entry_steps;
 use crate::cpu::Lanes;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -80,15 +81,9 @@ impl LatticeRows {
         if (rows as f64) < MIN_FILL * positions as f64 || positions >= u32::MAX as usize {
             return None;
         }
-        let offset: Vec<isize> = (0..block)
-            .map(|e| {
-                (0..D)
-                    .map(|a| {
-                        let d = (e / span.pow(a as u32)) % span;
-                        (d as isize - radius as isize) * stride[a] as isize
-                    })
-                    .sum()
-            })
+        let offset: Vec<isize> = entry_steps::<D>(radius)
+            .iter()
+            .map(|d| (0..D).map(|a| d[a] as isize * stride[a] as isize).sum())
             .collect();
         let pad = offset.iter().map(|o| o.unsigned_abs()).max().unwrap_or(0);
         // Entry `e` of a column `delta` positions away, where one is.

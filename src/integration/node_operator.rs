@@ -71,6 +71,15 @@ pub(crate) struct NodeOperator<const D: usize> {
     spare: Vec<f64>,
 }
 
+/// The lattice step of every entry of a row's room of `(2 radius + 1)^D` blocks, entry `e`
+/// holding the digits of `e` in base `2 radius + 1` (axis 0 first), each less `radius`.
+pub(super) fn entry_steps<const D: usize>(radius: usize) -> Vec<[i64; D]> {
+    let span = 2 * radius + 1;
+    (0..span.pow(D as u32))
+        .map(|e| std::array::from_fn(|a| ((e / span.pow(a as u32)) % span) as i64 - radius as i64))
+        .collect()
+}
+
 /// The inverse that a row's smoothing step applies: of its moment block `d` (`m × m`), or,
 /// where that block is singular for the order (a node whose support holds too few particles,
 /// as [`super::VC_MIN_RELATIVE_EIGENVALUE`] decides for the moment matrices), of its constant
@@ -152,15 +161,9 @@ impl<const D: usize> NodeOperator<D> {
             .collect();
         let centre = (block - 1) / 2;
         // The node-index step of every block entry.
-        let step: Vec<isize> = (0..block)
-            .map(|e| {
-                (0..D)
-                    .map(|a| {
-                        let d = (e / span.pow(a as u32)) % span;
-                        (d as isize - (width as isize - 1)) * strides[a] as isize
-                    })
-                    .sum()
-            })
+        let step: Vec<isize> = entry_steps::<D>(width - 1)
+            .iter()
+            .map(|d| (0..D).map(|a| d[a] as isize * strides[a] as isize).sum())
             .collect();
         // B, dense per row room.
         let OperatorStorage {
@@ -902,11 +905,7 @@ impl<const D: usize> NodeOperator<D> {
         let mut count = vec![0u32; coarse];
         let mut column = vec![0u32; coarse * block];
         let mut value = vec![0.0; coarse * block * mcc];
-        let steps: Vec<[i64; D]> = (0..block)
-            .map(|e| {
-                std::array::from_fn(|k| ((e / span.pow(k as u32)) % span) as i64 - radius as i64)
-            })
-            .collect();
+        let steps = entry_steps::<D>(radius);
         count
             .par_iter_mut()
             .zip(column.par_chunks_mut(block))
