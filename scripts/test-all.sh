@@ -29,8 +29,12 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 export RUST_BACKTRACE=0
-echo "== Rust tests (cargo test --release)"
-cargo test --release
+# The test targets and the doc tests; the examples (the studies' full runs) are not built here:
+# clippy --all-targets checks that they compile, and each would link the engine's generic step
+# anew (minutes of a fresh build).
+echo "== Rust tests (cargo test --release --tests, then --doc)"
+cargo test --release --tests
+cargo test --release --doc
 
 echo "== The parallel node-sum primitives under Miri (skipped, saying so, without a nightly)"
 ./scripts/test-miri.sh
@@ -39,7 +43,9 @@ echo "== Every C and Fortran block of README.md and docs/*.md compiles and runs;
 ./scripts/test-doc-snippets.sh
 
 echo "== VTK output read back with a real reader (meshio, in build/vtk-venv)"
-./scripts/test-vtk.sh
+# The runner the tests above built (a `cargo build --bin rkmpm` resolves the dependencies'
+# features without the dev-dependencies and would build the engine again).
+RKMPM_BIN=$PWD/target/release/rkmpm ./scripts/test-vtk.sh
 
 echo "== C and Fortran drivers (CMake + CTest)"
 build=build/examples

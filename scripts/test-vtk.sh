@@ -7,7 +7,8 @@
 #   scripts/test-vtk.sh
 #
 # The Python environment is build/vtk-venv (python3 -m venv, packages of tests/vtk/requirements.txt
-# from PyPI), made once and reused while the requirements are unchanged. The runner is built with
+# from PyPI), made once and reused while the requirements are unchanged. The runner is $RKMPM_BIN
+# when set (scripts/test-all.sh passes the one its tests built), else built with
 # `cargo build --release --bin rkmpm` into $CARGO_TARGET_DIR (default: target/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -51,10 +52,16 @@ else
 fi
 "$venv/bin/python" -c 'import meshio, numpy; print(f"   meshio {meshio.__version__}, numpy {numpy.__version__}")'
 
-target=${CARGO_TARGET_DIR:-$root/target}
-echo "== cargo build --release --bin rkmpm (target dir $target)"
-CARGO_TARGET_DIR=$target cargo build --release --bin rkmpm
-rkmpm=$target/release/rkmpm
+if [ -n "${RKMPM_BIN:-}" ]; then
+  [ -x "$RKMPM_BIN" ] || fail "RKMPM_BIN=$RKMPM_BIN is not an executable"
+  rkmpm=$RKMPM_BIN
+  echo "== runner: $rkmpm"
+else
+  target=${CARGO_TARGET_DIR:-$root/target}
+  echo "== cargo build --release --bin rkmpm (target dir $target)"
+  CARGO_TARGET_DIR=$target cargo build --release --bin rkmpm
+  rkmpm=$target/release/rkmpm
+fi
 
 out=$root/build/vtk-check
 rm -rf "$out"

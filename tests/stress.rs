@@ -1,6 +1,6 @@
 //! Stress tests: inputs at the edges of what a host code may hand the engine. Each asserts
 //! physics (exact free flight, conservation, no energy growth) or a clean refusal that keeps the
-//! last good state; the measured figures are printed (`cargo test --release --test stress --
+//! last good state; the measured figures are printed (`cargo test --release --test engine stress:: --
 //! --nocapture`) and recorded in docs/ROBUSTNESS.md.
 
 use rkmpm::walls::{Side, Wall};
