@@ -273,6 +273,11 @@ pub struct VcCorrection<const D: usize> {
     frame: Vec<(Matrix<D>, Vector<D>)>,
     /// The last step's storage of the assembled `K`, reused (its pages already mapped).
     storage: OperatorStorage,
+    /// Per slot, the connected body of the nodes that the field's particles join (see
+    /// [`bodies`]), when the solve took every such node (the mean fit; with the linear fit
+    /// weakly reached nodes join no body): the bodies whose torque the step removes, so that
+    /// they are not found twice. Empty otherwise.
+    body_of: Vec<usize>,
     /// At order 1, whether the correction subtracts the particles' linear fit (else their
     /// mean): [`crate::options::Shape::vc_linear_fit`].
     pub linear_fit: bool,
@@ -310,6 +315,7 @@ impl<const D: usize> VcCorrection<D> {
             fit: Vec::new(),
             frame: Vec::new(),
             storage: OperatorStorage::default(),
+            body_of: Vec::new(),
             linear_fit: false,
             solve: VcSolve::default(),
             iterations: 0,
@@ -357,6 +363,7 @@ impl<const D: usize> VcCorrection<D> {
         } = inputs;
         let m = self.m();
         let h = grid.cell_size;
+        self.body_of.clear();
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
@@ -981,6 +988,16 @@ impl<const D: usize> VcCorrection<D> {
         if let Some(multilevel) = multilevel {
             self.storage = multilevel.into_storage();
         }
+        if weak == 0.0 {
+            self.body_of = body_of;
+        }
+    }
+
+    /// Per slot of the nodes active now, the connected body of the nodes the field's particles
+    /// join, as the last solve found them; empty when it found none or left weakly reached nodes
+    /// out (the linear fit).
+    pub fn bodies(&self) -> &[usize] {
+        &self.body_of
     }
 
     /// Whether node `n` (active) had a singular moment matrix and got the order-1 correction only.

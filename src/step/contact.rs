@@ -111,10 +111,11 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
             nodes,
         );
         mass_floor = mass_floor_fraction * largest_mass;
-        if let (Some(_), Some(stored)) = (vc, stored) {
+        if let (Some(vc), Some(stored)) = (vc, stored) {
             let material = &ps.material;
             let in_body = |p: usize| material[p] == b as u32;
-            super::vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), in_body, nodes);
+            let (found, n) = (vc.bodies(), ps.len());
+            super::vc_torque::remove_vc_torque(grid, walls, stored, n, in_body, found, nodes);
         }
         let friction = grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
         if rigid[b].is_none() {

@@ -562,9 +562,10 @@ fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
             None,
             &mut work.nodes,
         );
-    if let (Some(_), Some(stored)) = (vc, inputs.stored) {
-        let walls = inputs.walls;
-        vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), |_| true, &mut work.nodes);
+    if let (Some(vc), Some(stored)) = (vc, inputs.stored) {
+        let (walls, all) = (inputs.walls, |_| true);
+        let found = vc.bodies();
+        vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), all, found, &mut work.nodes);
     }
     if boundary.has_tractions() {
         apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);

@@ -37,13 +37,16 @@ use crate::shape::Stencils;
 use crate::{Matrix, Vector};
 
 /// Removes the torque of the internal forces in `nodes.force` per connected body of the
-/// particles `in_field` (their stencils in `stencils`, their nodes active in `nodes`).
+/// particles `in_field` (their stencils in `stencils`, their nodes active in `nodes`). `found`
+/// is the body of every active node if the VC solve of this field found them
+/// ([`crate::integration::VcCorrection::bodies`]: the same particles, stencils and nodes), else empty.
 pub(super) fn remove_vc_torque<const D: usize>(
     grid: &Grid<D>,
     walls: &Walls<D>,
     stencils: &Stencils<D>,
     particles: usize,
     in_field: impl Fn(usize) -> bool + Sync,
+    found: &[usize],
     nodes: &mut GridNodes<D>,
 ) {
     // The fraction of a node's force the grid update applies where it drops the rest.
@@ -53,9 +56,12 @@ pub(super) fn remove_vc_torque<const D: usize>(
     };
     let applied = |m: f64| if m < floor { m / floor } else { 1.0 };
     let slots = nodes.active.len();
-    let body_of = {
+    let computed;
+    let body_of = if found.len() == slots {
+        found
+    } else {
         let nodes = &*nodes;
-        bodies(slots, particles, |p, visit: &mut dyn FnMut(usize)| {
+        computed = bodies(slots, particles, |p, visit: &mut dyn FnMut(usize)| {
             if in_field(p) {
                 stencils.for_each_shape(p, |_, s| {
                     if s.in_support() {
@@ -63,7 +69,8 @@ pub(super) fn remove_vc_torque<const D: usize>(
                     }
                 });
             }
-        })
+        });
+        &computed
     };
     let count = body_of.iter().copied().max().map_or(0, |b| b + 1);
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); count];
