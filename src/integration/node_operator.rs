@@ -28,6 +28,28 @@ use rayon::prelude::*;
 /// stencils give rows of `11^3` blocks of `4 × 4`) are applied matrix-free.
 const MAX_ASSEMBLED_VALUES: usize = 1 << 26;
 
+/// At order ≥ 2, the particles of one bin whose stencils hold the same nodes (sorted by their
+/// first node: in practice the particles of one cell) are assembled together, up to this many at
+/// a time: their blocks `c_p (w_Ip Q_I)(w_Jp Q_J)ᵀ` summed in registers, so that a row's memory
+/// takes one update per batch instead of one per particle.
+const ASSEMBLY_BATCH: usize = 8;
+
+/// The particles of one stencil gathered for [`NodeOperator::assemble`] at order ≥ 2.
+struct BoxBatch {
+    /// The stencil's nodes, and how many particles the batch holds.
+    nodes: Vec<usize>,
+    n: usize,
+    /// Per particle, `c_p = V_p / Σ_I w_Ip`.
+    c: [f64; ASSEMBLY_BATCH],
+    /// Per stencil slot, particle and polynomial: `w_Ip Q_a(x_p)` (zero off the support).
+    u: Vec<f64>,
+    /// Per stencil slot: its node's row and key (valid where `live`), and whether any particle
+    /// of the batch has the node in its support.
+    row: Vec<usize>,
+    key: Vec<isize>,
+    live: Vec<bool>,
+}
+
 /// The buffers of an assembled `K` (its packed rows and their lattice layout), handed from
 /// one step's operator to the next so that their pages are mapped once (a fresh allocation of
 /// tens of MB a step faults every page in again: a tenth of a 3D VC step).
@@ -182,11 +204,62 @@ impl<const D: usize> NodeOperator<D> {
                     let mut key = vec![0isize; len];
                     let mut q = vec![0.0; len * m];
                     let mut u = vec![crate::Vector::<D>::zeros(); len];
-                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
-                        let p = p as usize;
-                        if !counted(p) {
-                            continue;
+                    // At order ≥ 2 the bin's particles by their stencil's first node (then
+                    // index), so that the particles of one stencil come in a row and are
+                    // assembled as a batch.
+                    let mut particles: Vec<(usize, usize)> = bins.order
+                        [bins.occupied[b as usize].1.clone()]
+                    .iter()
+                    .map(|&p| p as usize)
+                    .filter(|&p| counted(p))
+                    .map(|p| (if m > 1 { stencils.of(p).0[0] } else { 0 }, p))
+                    .collect();
+                    if m > 1 {
+                        particles.sort_unstable();
+                    }
+                    let mut batch = (m > 1).then(|| BoxBatch {
+                        nodes: vec![0; len],
+                        n: 0,
+                        c: [0.0; ASSEMBLY_BATCH],
+                        u: vec![0.0; len * ASSEMBLY_BATCH * m],
+                        row: vec![0; len],
+                        key: vec![0; len],
+                        live: vec![false; len],
+                    });
+                    let mut uc = vec![0.0; m * ASSEMBLY_BATCH];
+                    // Adds the batch's blocks to its rows and empties it.
+                    let mut flush = |batch: &mut BoxBatch| {
+                        let n = batch.n;
+                        if n == 0 {
+                            return;
                         }
+                        let at = |s: usize, k: usize| (s * ASSEMBLY_BATCH + k) * m;
+                        for i in (0..len).filter(|&i| batch.live[i]) {
+                            for k in 0..n {
+                                for a in 0..m {
+                                    uc[a * ASSEMBLY_BATCH + k] = batch.c[k] * batch.u[at(i, k) + a];
+                                }
+                            }
+                            // SAFETY: as below.
+                            let r = unsafe { rows.range(batch.row[i] * block * mm, block * mm) };
+                            let base = centre as isize - batch.key[i];
+                            for j in (0..len).filter(|&j| batch.live[j]) {
+                                let e = (base + batch.key[j]) as usize;
+                                let r = &mut r[e * mm..(e + 1) * mm];
+                                for a in 0..m {
+                                    let ua = &uc[a * ASSEMBLY_BATCH..a * ASSEMBLY_BATCH + n];
+                                    for b in 0..m {
+                                        let t: f64 =
+                                            (0..n).map(|k| ua[k] * batch.u[at(j, k) + b]).sum();
+                                        r[a * m + b] += t;
+                                    }
+                                }
+                            }
+                        }
+                        batch.n = 0;
+                        batch.live.fill(false);
+                    };
+                    for &(_, p) in &particles {
                         let (ns, vs, gs) = stencils.of(p);
                         let mut total = 0.0;
                         for s in 0..len {
@@ -239,6 +312,31 @@ impl<const D: usize> NodeOperator<D> {
                                     .sum();
                             }
                         }
+                        if let Some(batch) = batch.as_mut() {
+                            if batch.n == ASSEMBLY_BATCH || (batch.n > 0 && batch.nodes != ns) {
+                                flush(batch);
+                            }
+                            let k = batch.n;
+                            if k == 0 {
+                                batch.nodes.copy_from_slice(ns);
+                            }
+                            batch.c[k] = c;
+                            for s in 0..len {
+                                let at = (s * ASSEMBLY_BATCH + k) * m;
+                                if w[s] == 0.0 {
+                                    batch.u[at..at + m].fill(0.0);
+                                    continue;
+                                }
+                                batch.live[s] = true;
+                                batch.row[s] = row[s];
+                                batch.key[s] = key[s];
+                                for a in 0..m {
+                                    batch.u[at + a] = w[s] * q[s * m + a];
+                                }
+                            }
+                            batch.n += 1;
+                            continue;
+                        }
                         for i in 0..len {
                             if w[i] == 0.0 {
                                 continue;
@@ -272,6 +370,9 @@ impl<const D: usize> NodeOperator<D> {
                                 }
                             }
                         }
+                    }
+                    if let Some(batch) = batch.as_mut() {
+                        flush(batch);
                     }
                 });
             }
