@@ -1455,3 +1455,44 @@ impl<const D: usize> Multilevel<D> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::mirrored_pairs;
+
+    /// Every row length to 64: the aggregates are numbered from 0 at the low end, each a run of
+    /// neighbours; the row's mirror image gives the same aggregates (numbered from the other
+    /// end); an even row is cut into pairs, an odd one into pairs and threes (the row of five,
+    /// whose middle three leave one node at each end, is one aggregate), so each level has about
+    /// half the nodes of the one above.
+    #[test]
+    fn mirrored_pairs_are_runs_of_two_or_three_symmetric_about_the_middle() {
+        for n in 1..=64usize {
+            let agg = mirrored_pairs(n);
+            assert_eq!(agg.len(), n, "n = {n}");
+            assert_eq!(agg[0], 0, "n = {n}");
+            assert!(
+                agg.windows(2).all(|w| w[1] == w[0] || w[1] == w[0] + 1),
+                "n = {n}: not runs numbered in order: {agg:?}"
+            );
+            let last = agg[n - 1];
+            assert!(
+                (0..n).all(|t| agg[n - 1 - t] == last - agg[t]),
+                "n = {n}: not mirror symmetric: {agg:?}"
+            );
+            let mut sizes = vec![0usize; last + 1];
+            agg.iter().for_each(|&a| sizes[a] += 1);
+            let allowed = match n {
+                1 => vec![1],
+                3 => vec![3],
+                5 => vec![5],
+                _ if n % 2 == 0 => vec![2],
+                _ => vec![2, 3],
+            };
+            assert!(
+                sizes.iter().all(|s| allowed.contains(s)),
+                "n = {n}: aggregate sizes {sizes:?}"
+            );
+        }
+    }
+}
