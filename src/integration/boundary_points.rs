@@ -170,19 +170,31 @@ impl<const D: usize> BoundaryPoints<D> {
         deformation_gradients: &[Matrix<D>],
     ) -> (Vec<Vector<D>>, Vec<Vector<D>>) {
         let root = |x: f64| if D == 2 { x.sqrt() } else { x.cbrt() };
-        // Per particle: the half side of its domain in reference coordinates, the map back to
-        // them, and its current spacing.
-        let domains: Vec<(f64, Matrix<D>, f64)> = reference_volumes
-            .par_iter()
-            .zip(deformation_gradients)
-            .map(|(&v0, f)| {
-                let s = root(v0);
-                let j = crate::determinant(f);
-                let inverse = f.try_inverse().unwrap_or_else(Matrix::zeros);
-                (SURFACE_DOMAIN_SCALE * 0.5 * s, inverse, s * root(j.abs()))
-            })
-            .collect();
-        let target = SURFACE_DOMAIN_SCALE * 0.5 * domains.iter().map(|d| d.2).fold(0.0, f64::max);
+        // Per particle: the half side of its domain in reference coordinates and its current
+        // spacing (the map back to reference coordinates is recomputed where it is needed).
+        // The root of a volume repeated from the particle before (a lattice's) is not taken
+        // again, nor that of `J = 1`: `cbrt` is about as costly as the rest of a particle here.
+        let mut halves = vec![0.0; positions.len()];
+        let mut spacing = vec![0.0; positions.len()];
+        halves
+            .par_chunks_mut(PARTICLE_CHUNK)
+            .zip(spacing.par_chunks_mut(PARTICLE_CHUNK))
+            .zip(reference_volumes.par_chunks(PARTICLE_CHUNK))
+            .zip(deformation_gradients.par_chunks(PARTICLE_CHUNK))
+            .for_each(|(((halves, spacing), volumes), fs)| {
+                let (mut last, mut s) = (f64::NAN, f64::NAN);
+                for (((half, spacing), &v0), f) in
+                    halves.iter_mut().zip(spacing).zip(volumes).zip(fs)
+                {
+                    if v0.to_bits() != last.to_bits() {
+                        (last, s) = (v0, root(v0));
+                    }
+                    let j = crate::determinant(f).abs();
+                    *half = SURFACE_DOMAIN_SCALE * 0.5 * s;
+                    *spacing = s * if j == 1.0 { 1.0 } else { root(j) };
+                }
+            });
+        let target = SURFACE_DOMAIN_SCALE * 0.5 * spacing.iter().copied().fold(0.0, f64::max);
         if !(target > 0.0 && target.is_finite()) {
             return (Vec::new(), Vec::new());
         }
@@ -201,24 +213,27 @@ impl<const D: usize> BoundaryPoints<D> {
         let ranges: Vec<([i64; D], [i64; D])> = positions
             .par_iter()
             .zip(deformation_gradients)
-            .zip(&domains)
-            .map(|((x, f), &(half, _, _))| {
+            .zip(&halves)
+            .map(|((x, f), &half)| {
                 let extent: [f64; D] =
                     std::array::from_fn(|a| half * (0..D).map(|b| f[(a, b)].abs()).sum::<f64>());
                 let lo = std::array::from_fn(|a| {
-                    (((x[a] - extent[a] - origin[a]) / v - 0.5).ceil() as i64).max(0)
+                    ceil_index((x[a] - extent[a] - origin[a]) / v - 0.5).max(0)
                 });
                 let hi = std::array::from_fn(|a| {
-                    (((x[a] + extent[a] - origin[a]) / v - 0.5).floor() as i64).min(last[a])
+                    crate::floor_index((x[a] + extent[a] - origin[a]) / v - 0.5).min(last[a])
                 });
                 (lo, hi)
             })
             .collect();
         // The body's voxels: the centres inside some particle's domain, visited row by row
         // along axis 0 (the reference coordinates of the next centre are one step away).
-        let voxels_of = |p: usize, visit: &mut dyn FnMut([i64; D])| {
+        let voxels_of = |p: usize, visited: &mut Vec<[i64; D]>| {
             let (lo, hi) = ranges[p];
-            let (half, to_reference, _) = &domains[p];
+            let half = halves[p];
+            let to_reference = deformation_gradients[p]
+                .try_inverse()
+                .unwrap_or_else(Matrix::zeros);
             let count: [usize; D] = std::array::from_fn(|a| (hi[a] - lo[a] + 1).max(0) as usize);
             let step = to_reference.column(0) * v;
             for row in 0..count[1..].iter().product::<usize>() {
@@ -231,8 +246,8 @@ impl<const D: usize> BoundaryPoints<D> {
                 let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
                 let mut xi = to_reference * (centre - positions[p]);
                 for _ in 0..count[0] {
-                    if xi.iter().all(|c| c.abs() <= *half) {
-                        visit(k);
+                    if xi.iter().all(|c| c.abs() <= half) {
+                        visited.push(k);
                     }
                     xi += step;
                     k[0] += 1;
@@ -245,7 +260,7 @@ impl<const D: usize> BoundaryPoints<D> {
         // inside the body. Fill every enclosed hole that lies within half a particle's mean
         // spacing of the body.
         let mean_volume =
-            domains.iter().map(|d| d.2.powi(D as i32)).sum::<f64>() / domains.len().max(1) as f64;
+            spacing.iter().map(|s| s.powi(D as i32)).sum::<f64>() / spacing.len().max(1) as f64;
         let reach = (0.5 * root(mean_volume) / v).round().max(1.0) as usize;
         body.fill_narrow_holes(&last, reach);
         // Faces merged by twos per tangential axis (when a half cell holds an even number of
@@ -255,11 +270,7 @@ impl<const D: usize> BoundaryPoints<D> {
         // the voxels that is one face per particle face; the normals still sum to zero. The
         // points keep the faces' fixed order.
         let full = 1usize << (D - 1);
-        let exposed = |k: &[i64; D], a: usize, sign: i64| {
-            let mut n = *k;
-            n[a] += sign;
-            body.contains(k) && !body.contains(&n)
-        };
+        let exposed = |k: &[i64; D], a: usize, sign: i64| body.exposed(k, a, sign);
         // A face (centre in voxel units, side `width` voxels along each tangential axis) as its
         // 2^{D−1} two-point Gauss points, each with its share of the area: exact for the
         // polynomial pieces of the shape functions on the face.
@@ -285,10 +296,10 @@ impl<const D: usize> BoundaryPoints<D> {
                 (x, e)
             })
         };
-        let found: Vec<Vec<(Vector<D>, Vector<D>)>> = body
+        let found: Vec<(Vector<D>, Vector<D>)> = body
             .exposed_faces()
             .into_par_iter()
-            .filter_map(|(k, a, sign)| {
+            .flat_map_iter(|(k, a, sign)| {
                 let normal = k[a] as f64 + 0.5 + 0.5 * sign as f64;
                 let first: [i64; D] =
                     std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) * 2 });
@@ -301,10 +312,10 @@ impl<const D: usize> BoundaryPoints<D> {
                         }
                         exposed(&member, a, sign)
                     });
-                if !grouped {
+                let face = if !grouped {
                     let centre =
                         std::array::from_fn(|b| if b == a { normal } else { k[b] as f64 + 0.5 });
-                    Some(points(centre, a, sign, 1.0).collect())
+                    Some((centre, 1.0))
                 } else if k == first {
                     // Centre of the block's side: 2g + 1 voxels along each tangential axis.
                     let centre = std::array::from_fn(|b| {
@@ -314,13 +325,15 @@ impl<const D: usize> BoundaryPoints<D> {
                             first[b] as f64 + 1.0
                         }
                     });
-                    Some(points(centre, a, sign, 2.0).collect())
+                    Some((centre, 2.0))
                 } else {
                     None
-                }
+                };
+                face.into_iter()
+                    .flat_map(move |(centre, width)| points(centre, a, sign, width))
             })
             .collect();
-        found.into_iter().flatten().unzip()
+        found.into_iter().unzip()
     }
 }
 
@@ -335,7 +348,7 @@ enum VoxelSet<const D: usize> {
         /// The box: `first ..first + dims` per axis, axis 0 fastest in `body`.
         first: [i64; D],
         dims: [usize; D],
-        body: Vec<AtomicBool>,
+        body: Vec<bool>,
     },
     Sparse(Vec<[i64; D]>),
 }
@@ -345,11 +358,11 @@ enum VoxelSet<const D: usize> {
 const DENSE_VOXELS_PER_PARTICLE: usize = 64;
 
 impl<const D: usize> VoxelSet<D> {
-    /// The voxels `voxels_of(p, visit)` visits for each particle `p`, all within its range
+    /// The voxels `voxels_of(p, list)` appends to `list` for each particle `p`, all within its range
     /// `lo..=hi` of `ranges`.
     fn of(
         ranges: &[([i64; D], [i64; D])],
-        voxels_of: impl Fn(usize, &mut dyn FnMut([i64; D])) + Sync,
+        voxels_of: impl Fn(usize, &mut Vec<[i64; D]>) + Sync,
     ) -> Self {
         let mut first = [i64::MAX; D];
         let mut end = [i64::MIN; D];
@@ -373,27 +386,30 @@ impl<const D: usize> VoxelSet<D> {
             .filter(|&t| t <= DENSE_VOXELS_PER_PARTICLE * ranges.len());
         match total {
             Some(total) => {
-                let body: Vec<AtomicBool> = (0..total).map(|_| AtomicBool::new(false)).collect();
-                let set = VoxelSet::Dense { first, dims, body };
-                if let VoxelSet::Dense { body, .. } = &set {
-                    (0..ranges.len()).into_par_iter().for_each(|p| {
-                        voxels_of(p, &mut |k| {
+                let marked: Vec<AtomicBool> = (0..total).map(|_| AtomicBool::new(false)).collect();
+                let index = |k: &[i64; D]| dense_index(&first, &dims, k);
+                (0..ranges.len())
+                    .into_par_iter()
+                    .for_each_init(Vec::new, |list, p| {
+                        list.clear();
+                        voxels_of(p, list);
+                        for k in list.iter() {
                             // Every visited voxel lies in its particle's range, so in the box.
                             // Only ever set: the map does not depend on the threads' order.
-                            if let Some(i) = set.index(&k) {
-                                body[i].store(true, Ordering::Relaxed);
+                            if let Some(i) = index(k) {
+                                marked[i].store(true, Ordering::Relaxed);
                             }
-                        })
+                        }
                     });
-                }
-                set
+                let body = marked.into_iter().map(AtomicBool::into_inner).collect();
+                VoxelSet::Dense { first, dims, body }
             }
             None => {
                 let mut voxels: Vec<[i64; D]> = (0..ranges.len())
                     .into_par_iter()
                     .flat_map_iter(|p| {
                         let mut list = Vec::new();
-                        voxels_of(p, &mut |k| list.push(k));
+                        voxels_of(p, &mut list);
                         list
                     })
                     .collect();
@@ -420,7 +436,8 @@ impl<const D: usize> VoxelSet<D> {
             return;
         };
         let total = map.len();
-        let body: Vec<bool> = map.iter_mut().map(|b| *b.get_mut()).collect();
+        let body: &[bool] = map;
+        let filled = |i: usize| body[i];
         let position = |mut i: usize| -> [usize; D] {
             std::array::from_fn(|a| {
                 let r = i % dims[a];
@@ -428,9 +445,6 @@ impl<const D: usize> VoxelSet<D> {
                 r
             })
         };
-        let in_box =
-            |r: &[usize; D]| (0..D).all(|a| (0..=last[a]).contains(&(first[a] + r[a] as i64)));
-        let on_edge = |r: &[usize; D]| (0..D).any(|a| r[a] == 0 || r[a] + 1 == dims[a]);
         let strides: [usize; D] = std::array::from_fn(|a| dims[..a].iter().product());
         // Whether some body voxel lies within `reach` of voxel `r` along every axis.
         let near_body = |r: &[usize; D]| {
@@ -443,13 +457,29 @@ impl<const D: usize> VoxelSet<D> {
                     i += (lo[a] + j % count[a]) * strides[a];
                     j /= count[a];
                 }
-                body[i]
+                filled(i)
             })
         };
+        // The map's rows along axis 0: the part of a row in the box, and whether the row lies
+        // on the map's outer layer (else only its two ends do).
+        let (width, rows) = (dims[0], total / dims[0]);
+        let in_row =
+            (-first[0]).max(0) as usize..((last[0] - first[0] + 1).max(0) as usize).min(width);
+        let row_of = |row: usize| -> (bool, bool) {
+            let r = position(row * width);
+            let in_box = (1..D).all(|a| (0..=last[a]).contains(&(first[a] + r[a] as i64)));
+            let on_edge = (1..D).any(|a| r[a] == 0 || r[a] + 1 == dims[a]);
+            (in_box, on_edge)
+        };
         // Empty voxels of the box, not yet reached.
-        let mut open: Vec<bool> = (0..total)
-            .map(|i| !body[i] && in_box(&position(i)))
-            .collect();
+        let mut open = vec![false; total];
+        for row in 0..rows {
+            if row_of(row).0 {
+                for k0 in in_row.clone() {
+                    open[row * width + k0] = !filled(row * width + k0);
+                }
+            }
+        }
         let mut stack = Vec::new();
         let mut hole = Vec::new();
         // Every open voxel joined to `seed`, into `hole`; they are open no more.
@@ -472,45 +502,62 @@ impl<const D: usize> VoxelSet<D> {
             }
         };
         // The outside: open voxels joined to the map's outer layer.
-        for i in 0..total {
-            if open[i] && on_edge(&position(i)) {
-                flood(i, &mut open, &mut hole);
+        for row in 0..rows {
+            let ends = [row * width, row * width + width - 1];
+            let edge: &mut dyn Iterator<Item = usize> = match row_of(row).1 {
+                true => &mut (row * width..(row + 1) * width),
+                false => &mut ends.into_iter(),
+            };
+            for i in edge {
+                if open[i] {
+                    flood(i, &mut open, &mut hole);
+                }
             }
         }
+        // The holes left, filled once all are found (each judged against the body as found).
+        let mut fill = Vec::new();
         for i in 0..total {
             if open[i] {
                 flood(i, &mut open, &mut hole);
                 if hole.iter().all(|&j| near_body(&position(j))) {
-                    for &j in &hole {
-                        *map[j].get_mut() = true;
-                    }
+                    fill.extend_from_slice(&hole);
                 }
             }
+        }
+        for j in fill {
+            map[j] = true;
         }
     }
 
     /// Position of voxel `k` in the dense map, if it lies in its box.
     fn index(&self, k: &[i64; D]) -> Option<usize> {
-        let VoxelSet::Dense { first, dims, .. } = self else {
-            return None;
-        };
-        let mut i = 0;
-        for a in (0..D).rev() {
-            let r = k[a] - first[a];
-            if r < 0 || r >= dims[a] as i64 {
-                return None;
-            }
-            i = i * dims[a] + r as usize;
+        match self {
+            VoxelSet::Dense { first, dims, .. } => dense_index(first, dims, k),
+            VoxelSet::Sparse(_) => None,
         }
-        Some(i)
     }
 
     fn contains(&self, k: &[i64; D]) -> bool {
         match self {
-            VoxelSet::Dense { body, .. } => self
-                .index(k)
-                .is_some_and(|i| body[i].load(Ordering::Relaxed)),
+            VoxelSet::Dense { body, .. } => self.index(k).is_some_and(|i| body[i]),
             VoxelSet::Sparse(list) => list.binary_search(k).is_ok(),
+        }
+    }
+
+    /// Whether voxel `k` is in the body and its neighbour `k + sign e_a` is not: a face of the
+    /// surface.
+    fn exposed(&self, k: &[i64; D], a: usize, sign: i64) -> bool {
+        match self {
+            // A body voxel's neighbours lie in the map (the empty layer around it).
+            VoxelSet::Dense { dims, body, .. } => self.index(k).is_some_and(|i| {
+                let stride: usize = dims[..a].iter().product();
+                body[i] && !body[if sign < 0 { i - stride } else { i + stride }]
+            }),
+            VoxelSet::Sparse(_) => {
+                let mut n = *k;
+                n[a] += sign;
+                self.contains(k) && !self.contains(&n)
+            }
         }
     }
 
@@ -553,21 +600,37 @@ impl<const D: usize> VoxelSet<D> {
                         k[a] = first[a] + (r % dims[a]) as i64;
                         r /= dims[a];
                     }
-                    for (k0, cell) in cells.iter().enumerate() {
-                        if !cell.load(Ordering::Relaxed) {
+                    // A row with a body voxel lies inside the empty outer layer, so its
+                    // neighbouring rows (axes 1 and 2) lie in the map; a voxel whose six
+                    // neighbours are all in the body is passed over with no index arithmetic.
+                    if !cells.contains(&true) {
+                        return out;
+                    }
+                    let width = dims[0];
+                    let strides: [usize; D] = std::array::from_fn(|a| dims[..a].iter().product());
+                    let beside: [&[bool]; 4] = std::array::from_fn(|t| {
+                        let a = 1 + t / 2;
+                        match (a < D, t % 2) {
+                            (false, _) => cells,
+                            (true, 0) => &body[base - strides[a]..][..width],
+                            (true, _) => &body[base + strides[a]..][..width],
+                        }
+                    });
+                    for k0 in 1..width - 1 {
+                        if !cells[k0]
+                            || (cells[k0 - 1] && cells[k0 + 1] && beside.iter().all(|row| row[k0]))
+                        {
                             continue;
                         }
                         k[0] = first[0] + k0 as i64;
                         let i = base + k0;
-                        let mut stride = 1;
-                        for (a, dim) in dims.iter().enumerate() {
+                        for (a, stride) in strides.iter().enumerate() {
                             for sign in [-1i64, 1] {
                                 let n = if sign < 0 { i - stride } else { i + stride };
-                                if !body[n].load(Ordering::Relaxed) {
+                                if !body[n] {
                                     out.push((k, a, sign));
                                 }
                             }
-                            stride *= dim;
                         }
                     }
                     out
@@ -577,6 +640,32 @@ impl<const D: usize> VoxelSet<D> {
         chunks.concat()
     }
 }
+
+/// Position of voxel `k` in a dense map of the box `first ..first + dims` (axis 0 fastest), if
+/// it lies in the box.
+#[inline]
+fn dense_index<const D: usize>(first: &[i64; D], dims: &[usize; D], k: &[i64; D]) -> Option<usize> {
+    let mut i = 0;
+    for a in (0..D).rev() {
+        let r = k[a] - first[a];
+        if r < 0 || r >= dims[a] as i64 {
+            return None;
+        }
+        i = i * dims[a] + r as usize;
+    }
+    Some(i)
+}
+
+/// `⌈x⌉` as an integer (saturating; 0 for NaN), as `x.ceil() as i64` gives it, without the
+/// library call that `ceil` is on the baseline target.
+#[inline]
+fn ceil_index(x: f64) -> i64 {
+    let t = x as i64;
+    t.saturating_add(((t as f64) < x) as i64)
+}
+
+/// Particles per task of the surface's per-particle passes.
+const PARTICLE_CHUNK: usize = 4096;
 
 /// How much larger than its domain a particle is taken when the surface is found
 /// ([`BoundaryPoints::of_particles`]): on an undeformed lattice any scale in (1/2, 3/2) gives
@@ -872,6 +961,38 @@ mod tests {
 
     /// The dense voxel map (particles close together) and the sorted list (a particle far away
     /// makes the box too large for the map) find the same surface, in another order.
+    /// The voxel ranges' rounding up gives what `ceil` gives, at the edges of `i64` too.
+    #[test]
+    fn ceil_index_is_the_library_ceiling() {
+        let big = i64::MAX as f64;
+        for x in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5,
+            -2.5,
+            1e-300,
+            -1e-300,
+            4503599627370495.5,
+            -4503599627370495.5,
+            1e18,
+            -1e18,
+            big,
+            -big,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ] {
+            assert_eq!(ceil_index(x), x.ceil() as i64, "{x}");
+            assert_eq!(crate::floor_index(x), x.floor() as i64, "{x}");
+        }
+    }
+
     #[test]
     fn dense_and_sparse_voxel_sets_find_the_same_surface() {
         let s = 0.02;
