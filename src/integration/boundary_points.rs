@@ -149,11 +149,11 @@ impl<const D: usize> BoundaryPoints<D> {
     /// (so a body of two particles per cell per direction, compressed or stretched by up to a
     /// fifth, keeps two voxels per particle and axis, whose faces merge below, rather than
     /// jumping to three, nine times the points in 3D); those whose centres lie in some domain
-    /// and in the box `[origin, upper]` are the body. Every voxel face between the body and an empty voxel is
-    /// a surface element: its `2^{D−1}` two-point Gauss points, each with its share of the area
-    /// normal `±e_a v^{D−1}`. No face straddles a knot of the shape functions (nodes and
-    /// half-cells), so `Σ_b Ψ_I n_b a_b` is the voxel surface's integral exactly for the
-    /// B-splines (VC makes the particle sums equal it; a face-centre rule, spaced at a phase
+    /// and in the box `[origin, upper]` are the body. Every voxel face between the body and an
+    /// empty voxel is a surface element: its `2^{D−1}` two-point Gauss points, each with its
+    /// share of the area normal `±e_a v^{D−1}`. No face straddles a knot of the shape functions
+    /// (nodes and half-cells), so `Σ_b Ψ_I n_b a_b` is the voxel surface's integral exactly for
+    /// the B-splines (VC makes the particle sums equal it; a face-centre rule, spaced at a phase
     /// unrelated to the knots, carried a fixed fraction of error that did not shrink with h).
     /// The normals of each piece sum to zero exactly, a body that breaks apart gets its new
     /// faces, and no point drifts away from the material. A body against a wall has its faces
@@ -358,8 +358,8 @@ enum VoxelSet<const D: usize> {
 const DENSE_VOXELS_PER_PARTICLE: usize = 64;
 
 impl<const D: usize> VoxelSet<D> {
-    /// The voxels `voxels_of(p, list)` appends to `list` for each particle `p`, all within its range
-    /// `lo..=hi` of `ranges`.
+    /// The voxels `voxels_of(p, list)` appends to `list` for each particle `p`, all within its
+    /// range `lo..=hi` of `ranges`.
     fn of(
         ranges: &[([i64; D], [i64; D])],
         voxels_of: impl Fn(usize, &mut Vec<[i64; D]>) + Sync,
