@@ -648,12 +648,17 @@ const MULTILEVEL_WIDTH: f64 = 20.0;
 const WEAK_ROW: f64 = 1e-3;
 
 /// At order ≥ 2, the coarsest level's eigenvalues below this fraction of the largest are taken
-/// as its null space. The polynomials' are round-off (1e-16), but the coarsest level also has
-/// near-null directions (6e-9, 5e-8: nodes at a body's corners); inverting them put huge
-/// components into the search directions and conjugate gradients broke down near convergence
-/// in one step of three (RK2 + VC2 at 16 cells, 1e-8), which 1e-4 avoids; the conjugate
-/// gradients take those few directions on themselves.
-const COARSEST_EIGENVALUE: f64 = 1e-4;
+/// as its null space. The polynomials' are round-off (1e-16); the coarsest level also has
+/// near-null directions (6e-9, 5e-8: nodes at a body's corners, and a free body's polynomials
+/// held by the edge damping alone), which the V-cycle inverts. Left to the conjugate gradients
+/// (a threshold of 1e-4), each took its own iterations and the residual climbed back while it
+/// did: exact solves (1e-12), iterations per step, 1e-4 against 1e-10: the 2D benchmark block
+/// (`throughput --method rk2 --vc --particles 10000`) 88 against 58–61, the manufactured
+/// solution's box at 16 cells 18 against 11 (quarter points) and 26 against 13 (jittered), at
+/// 32 cells 41 against 24 and 63 against 32, with the same errors to four digits and no
+/// restart. (Inverting them once put huge components into the search directions and broke the
+/// solve down near convergence, before the edge damping's floor and the mirrored aggregates.)
+const COARSEST_EIGENVALUE: f64 = 1e-10;
 
 /// The coarsest level is solved directly when it has at most this many unknowns per direction
 /// (rows times test polynomials).
