@@ -649,15 +649,15 @@ const WEAK_ROW: f64 = 1e-3;
 
 /// At order ≥ 2, the coarsest level's eigenvalues below this fraction of the largest are taken
 /// as its null space. The polynomials' are round-off (1e-16); the coarsest level also has
-/// near-null directions (6e-9, 5e-8: nodes at a body's corners, and a free body's polynomials
-/// held by the edge damping alone), which the V-cycle inverts. Left to the conjugate gradients
-/// (a threshold of 1e-4), each took its own iterations and the residual climbed back while it
-/// did: exact solves (1e-12), iterations per step, 1e-4 against 1e-10: the 2D benchmark block
+/// near-null directions between 1e-10 and 1e-6 (6e-9, 5e-8 at a body's corners; none between
+/// 1e-6 and 1e-4: a threshold of 1e-6 changed no iteration), which the V-cycle inverts. Left to
+/// the conjugate gradients (a threshold of 1e-4), each took its own iterations and the residual
+/// climbed back while it did: exact solves (1e-12), iterations per step, 1e-4 against 1e-10:
+/// the 2D benchmark block
 /// (`throughput --method rk2 --vc --particles 10000`) 88 against 58–61, the manufactured
 /// solution's box at 16 cells 18 against 11 (quarter points) and 26 against 13 (jittered), at
 /// 32 cells 41 against 24 and 63 against 32, with the same errors to four digits and no
-/// restart. (Inverting them once put huge components into the search directions and broke the
-/// solve down near convergence, before the edge damping's floor and the mirrored aggregates.)
+/// restart, and the RK2 + VC2 mirror-symmetry and checkpoint tests hold.
 const COARSEST_EIGENVALUE: f64 = 1e-10;
 
 /// The same for order 1 with the linear fit, whose coarse levels carry `1, Z`: at 1e-10 its
