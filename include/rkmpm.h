@@ -36,7 +36,9 @@
 #define RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE 1000000000
 
 /**
- * The tolerance of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
+ * The tolerance of VC's solve of order 1 in a new simulation (the exact solve); at order >= 2 a
+ * new simulation's tolerance is 1e-4 on grids of up to 32 cells across and `1e-4 (32 / N)^3`
+ * on a grid `N` cells across (`rkmpm_sim_vc_solve` reports it; `rkmpm_sim_set_vc_solve`).
  */
 #define RKMPM_DEFAULT_VC_SOLVE_TOLERANCE 1e-12
 
@@ -864,13 +866,16 @@ enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
 /**
  * Sets the stopping rule of VC's conservative solve (`RKMPM_INTEGRATION_VC`): conjugate
  * gradients stop when the preconditioned residual has fallen to `tolerance` (in (0, 1]) of the
- * right-hand side's, or after `max_iterations` (>= 1). Default
- * `RKMPM_DEFAULT_VC_SOLVE_TOLERANCE` (1e-12, the exact solve: the divergence equalities to
- * round-off) and `RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS` (2000). 1e-4 keeps the convergence
- * study's errors within 0.2 % at a quarter of the cost of an RK2 + VC2 step, but breaks mirror
- * symmetry at 1e-6 with VC2 and made the VC granular collapse invert a particle
- * (docs/convergence/FINDINGS.md). Linear and angular momentum are conserved whatever the rule. May change between
- * steps; part of a checkpoint. A refused rule changes nothing.
+ * right-hand side's, or after `max_iterations` (>= 1). Without it a simulation takes the
+ * automatic rule for its VC order and grid: at order 1 `RKMPM_DEFAULT_VC_SOLVE_TOLERANCE`
+ * (1e-12, the exact solve: the divergence equalities to round-off) and
+ * `RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS` (2000); at order >= 2 1e-4 on grids of up to 32 cells
+ * across, falling as `(32 / N)^3` on a grid `N` cells across, which keeps the convergence
+ * study's errors within 1 % of the exact solve's at a quarter to a half of its iterations
+ * (`rkmpm_sim_vc_solve` reports the rule in force). At order 1, 1e-4 keeps the study's errors
+ * within 0.2 % but made the VC granular collapse invert a particle; loose rules break mirror
+ * symmetry (docs/convergence/FINDINGS.md). Linear and angular momentum are conserved whatever
+ * the rule. May change between steps; part of a checkpoint. A refused rule changes nothing.
  *
  * # Safety
  * `sim` must be a live handle.
@@ -880,7 +885,8 @@ enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
                                         uint64_t max_iterations);
 
 /**
- * Writes the stopping rule of VC's solve (`rkmpm_sim_set_vc_solve`) to `*out_tolerance` and
+ * Writes the stopping rule of VC's solve in force (`rkmpm_sim_set_vc_solve`: the one given, or the
+ * automatic rule for the simulation's VC order and grid) to `*out_tolerance` and
  * `*out_max_iterations`; neither is written unless both pointers are valid.
  *
  * # Safety

@@ -205,7 +205,7 @@ fn mirror_mismatch_of_drop<const D: usize>(
     }
     sim.set_wall(1, Side::Low, drop.wall).unwrap();
     sim.set_vc_linear_fit(drop.linear_fit).unwrap();
-    // The exact solve (the default), selected whatever the default is.
+    // The exact solve (the default at order 1, not at order 2), selected whatever the default is.
     sim.set_vc_solve(VcSolve::EXACT).unwrap();
     let mut g = V::<D>::zeros();
     g[1] = -9.81;
@@ -318,7 +318,7 @@ const FIXED: (&str, Wall) = ("fixed", Wall::Fixed);
 ///
 /// Without VC the mismatch is the round-off of the fall and the impact: 7.1e-15 measured in
 /// 2D. VC of order 1 adds nothing measurable (5.9e-15 to 4.9e-14, every floor). The drops solve
-/// VC exactly (`VcSolve::EXACT`, the default); at 1e-4 VC1 keeps the same figures (its
+/// VC exactly (`VcSolve::EXACT`, the default at order 1); at 1e-4 VC1 keeps the same figures (its
 /// node-block preconditioner is mirror symmetric on this grid) and so does RK2 + VC2 on the
 /// friction floor (5.5e-13), whose V-cycle's aggregates are mirror symmetric (3.5e-6 when they
 /// were pairs counted from one end). RK2 + VC2 keeps 2.5e-14 with the exact solve (8.4e-13 with

@@ -43,7 +43,9 @@ module rkmpm
    ! The bound on the steps of one advance of a new (or loaded) simulation
    ! (sim%set_max_steps_per_advance changes it).
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE = 1000000000
-   ! The stopping rule of VC's solve in a new simulation (sim%set_vc_solve changes it).
+   ! The stopping rule of VC's solve of order 1 in a new simulation (sim%set_vc_solve changes
+   ! it); at order >= 2 the automatic rule, 1e-4 falling as (32 / N)^3 on grids N > 32 cells
+   ! across (sim%vc_solve reports the rule in force).
    real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-12_c_double
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
 

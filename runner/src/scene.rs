@@ -131,13 +131,17 @@ impl OptionsSpec {
         Transfer::from_kind(self.transfer, self.flip.unwrap_or(0.0))
     }
 
-    /// The VC solve's stopping rule: the engine's default where a key is not given.
-    pub fn vc_solve(&self) -> rkmpm::VcSolve {
-        let default = rkmpm::VcSolve::DEFAULT;
-        rkmpm::VcSolve {
-            tolerance: self.vc_tolerance.unwrap_or(default.tolerance),
-            max_iterations: self.vc_max_iterations.unwrap_or(default.max_iterations),
+    /// The VC solve's stopping rule given `automatic`, the engine's rule for the scene's order
+    /// and grid: `None` (the automatic rule) without either key, its values where one key is
+    /// not given.
+    pub fn vc_solve(&self, automatic: rkmpm::VcSolve) -> Option<rkmpm::VcSolve> {
+        if self.vc_tolerance.is_none() && self.vc_max_iterations.is_none() {
+            return None;
         }
+        Some(rkmpm::VcSolve {
+            tolerance: self.vc_tolerance.unwrap_or(automatic.tolerance),
+            max_iterations: self.vc_max_iterations.unwrap_or(automatic.max_iterations),
+        })
     }
 
     /// Refuses values out of range and settings that would do nothing in this scene, naming
@@ -471,7 +475,9 @@ impl Scene {
         sim.set_shape(o.shape()).map_err(context(table))?;
         sim.set_integration(o.integration())
             .map_err(context(table))?;
-        sim.set_vc_solve(o.vc_solve()).map_err(context(table))?;
+        if let Some(solve) = o.vc_solve(sim.vc_solve()) {
+            sim.set_vc_solve(solve).map_err(context(table))?;
+        }
         sim.set_transfer(o.transfer()).map_err(context(table))?;
         sim.set_scheme(o.scheme).map_err(context(table))?;
         if let Some(g) = &o.gravity {
@@ -1030,6 +1036,12 @@ mod tests {
             Err(e) => Err(e.message),
         };
         assert_eq!(rule(disks), Ok(rkmpm::VcSolve::DEFAULT));
+        // RK2 + VC2 on the disks' grid (40 cells across): the automatic rule, 1e-4 (32 / 40)^3.
+        let vc2 = disks
+            .replacen("rk_order = 1\n", "rk_order = 2\n", 1)
+            .replacen("vc_order = 1\n", "vc_order = 2\n", 1);
+        let automatic = rule(&vc2).unwrap().tolerance;
+        assert!((automatic - 5.12e-5).abs() < 1e-18, "{automatic}");
         let with =
             |extra: &str| disks.replacen("vc_order = 1\n", &format!("vc_order = 1\n{extra}\n"), 1);
         assert_eq!(

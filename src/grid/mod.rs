@@ -91,6 +91,11 @@ impl<const D: usize> Grid<D> {
         self.dims
     }
 
+    /// The cells along the grid's widest axis.
+    pub fn cells_across(&self) -> usize {
+        self.cells.iter().copied().max().unwrap_or(0)
+    }
+
     /// Storage index step per axis.
     pub fn strides(&self) -> [usize; D] {
         self.strides

@@ -100,10 +100,10 @@ use rayon::prelude::*;
 /// a thin sliver of the body) the node gets the order-1 (constant) correction only.
 pub const VC_MIN_RELATIVE_EIGENVALUE: f64 = 1e-4;
 
-/// The conservative correction's solve stops, by default, when the preconditioned residual norm
-/// has fallen by this factor (see `VcSolve`): the exact solve. Looser rules keep the study's
-/// errors (1e-4: within 0.2 %) but not the VC granular collapse, which then inverts a particle
-/// (docs/convergence/FINDINGS.md, "The VC solve's stopping rule").
+/// The conservative correction's solve stops, by default at order 1, when the preconditioned
+/// residual norm has fallen by this factor (see `VcSolve`): the exact solve. Looser rules keep
+/// the study's errors (1e-4: within 0.2 %) but not the VC granular collapse, which then inverts
+/// a particle (docs/convergence/FINDINGS.md, "The VC solve's stopping rule").
 pub const VC_SOLVE_TOLERANCE: f64 = 1e-12;
 
 /// The exact solve's tolerance (`VcSolve::EXACT`): the divergence equalities met to round-off.
@@ -112,14 +112,26 @@ pub const VC_SOLVE_EXACT_TOLERANCE: f64 = 1e-12;
 /// At most this many conjugate-gradient iterations per step, by default (see `VcSolve`).
 pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
 
+/// At order ≥ 2 the default solve stops at this tolerance on grids of at most
+/// `VC_SOLVE_REFERENCE_CELLS` cells across, and at `1e-4 (32 / N)^3` on a grid of `N` cells
+/// across its widest axis ([`VcSolve::automatic`]): the quadrature error that VC removes falls
+/// as `h^3` at order 2, and so must the residual the solve leaves. Measured: within 1 % of the
+/// exact solve's errors to 64 cells (docs/convergence/FINDINGS.md).
+pub const VC_SOLVE_HIGHER_ORDER_TOLERANCE: f64 = 1e-4;
+
+/// The grid width (cells across) up to which `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4) holds as it is.
+pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
+
 /// The stopping rule of VC's conservative solve: conjugate gradients stop when the
 /// preconditioned residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`. Conservation does not depend on it: the corrected gradients sum to zero
 /// over a particle's nodes whatever the coefficients are; the divergence equalities are met to
-/// the tolerance. The default is the exact solve, 1e-12 (`VC_SOLVE_TOLERANCE`);
-/// [`VcSolve::EXACT`] names it for tests that check the equalities or mirror symmetry to
-/// round-off whatever the default. 1e-4 moves the study's errors by at most 0.2 % and makes an
-/// RK2 + VC2 step about four times faster, but the VC granular collapse then inverts a particle.
+/// the tolerance. A simulation takes [`VcSolve::automatic`] unless given a rule: the exact solve
+/// (1e-12) at order 1, and at order ≥ 2 a tolerance of 1e-4 that falls as `h^3` on grids finer
+/// than 32 cells across (a quarter to a half of the exact solve's iterations, errors within
+/// 1 %). [`VcSolve::EXACT`] names the exact solve for tests that check the equalities or mirror
+/// symmetry to round-off. At order 1, 1e-4 moves the study's errors by at most 0.2 %, but the VC
+/// granular collapse then inverts a particle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VcSolve {
     pub tolerance: f64,
@@ -133,8 +145,8 @@ impl Default for VcSolve {
 }
 
 impl VcSolve {
-    /// The default rule: 1e-12 of the right-hand side's residual (`VC_SOLVE_TOLERANCE`), at
-    /// most 2000 iterations.
+    /// The default rule at order 1: 1e-12 of the right-hand side's residual
+    /// (`VC_SOLVE_TOLERANCE`), at most 2000 iterations.
     pub const DEFAULT: VcSolve = VcSolve {
         tolerance: VC_SOLVE_TOLERANCE,
         max_iterations: VC_SOLVE_MAX_ITERATIONS,
@@ -146,6 +158,23 @@ impl VcSolve {
         tolerance: VC_SOLVE_EXACT_TOLERANCE,
         max_iterations: VC_SOLVE_MAX_ITERATIONS,
     };
+
+    /// The rule a simulation takes unless given one, for VC of `order` on a grid of
+    /// `cells_across` cells along its widest axis: [`VcSolve::DEFAULT`] (the exact solve) at
+    /// order 1; at order ≥ 2 `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4), times
+    /// `(32 / cells_across)^3` on grids wider than 32 cells (`VC_SOLVE_REFERENCE_CELLS`), never below the exact
+    /// solve's tolerance.
+    pub fn automatic(order: u32, cells_across: usize) -> VcSolve {
+        if order < 2 {
+            return VcSolve::DEFAULT;
+        }
+        let refined = (VC_SOLVE_REFERENCE_CELLS as f64 / cells_across.max(1) as f64).min(1.0);
+        VcSolve {
+            tolerance: (VC_SOLVE_HIGHER_ORDER_TOLERANCE * refined.powi(3))
+                .max(VC_SOLVE_EXACT_TOLERANCE),
+            max_iterations: VC_SOLVE_MAX_ITERATIONS,
+        }
+    }
 
     /// Refuses a tolerance outside `(0, 1]` (or not finite) and zero iterations.
     pub fn check(&self) -> Result<()> {

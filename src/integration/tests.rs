@@ -590,3 +590,23 @@ fn bodies_are_the_components_on_any_number_of_threads() {
         assert_eq!(run(threads), expected, "{threads} threads");
     }
 }
+
+/// The automatic stopping rule: the exact solve at order 1; at order ≥ 2 1e-4 to 32 cells
+/// across, then `1e-4 (32 / N)^3`, never below the exact solve's tolerance.
+#[test]
+fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
+    for cells in [1, 32, 64, 100_000] {
+        assert_eq!(VcSolve::automatic(1, cells), VcSolve::DEFAULT);
+    }
+    let tolerance = |order, cells| VcSolve::automatic(order, cells).tolerance;
+    assert_eq!(tolerance(2, 0), 1e-4);
+    assert_eq!(tolerance(2, 16), 1e-4);
+    assert_eq!(tolerance(3, 32), 1e-4);
+    assert_eq!(tolerance(2, 64), 1.25e-5);
+    assert!((tolerance(2, 128) / 1.5625e-6 - 1.0).abs() < 1e-15);
+    assert_eq!(tolerance(2, 1 << 24), VcSolve::EXACT.tolerance);
+    assert_eq!(
+        VcSolve::automatic(2, 64).max_iterations,
+        VcSolve::DEFAULT.max_iterations
+    );
+}

@@ -37,8 +37,10 @@ const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// Version 3 adds the energy ledger (`Sim::set_energy_accounting`) after the step count;
 /// older files load with the accounting off. Version 4 adds the VC solve's stopping rule
 /// (`Sim::set_vc_solve`) at the end; older files, written when the exact solve was the default,
-/// load with `VcSolve::EXACT`.
-pub const CHECKPOINT_VERSION: u32 = 4;
+/// load with `VcSolve::EXACT`. Version 5 writes the automatic rule (`VcSolve::automatic`, no
+/// rule given) as a tolerance and an iteration bound of zero; version 4 files load with the
+/// rule they hold.
+pub const CHECKPOINT_VERSION: u32 = 5;
 
 fn corrupt(what: impl Into<String>) -> Error {
     Error::new(ErrorKind::CorruptFile, what)
@@ -489,7 +491,10 @@ impl<const D: usize> Sim<D> {
                 .iter(),
             );
         }
-        if version >= 4 {
+        if version >= 5 && self.vc_solve_is_automatic() {
+            w.f64(0.0);
+            w.u64(0);
+        } else if version >= 4 {
             w.f64(self.vc_solve().tolerance);
             w.u64(self.vc_solve().max_iterations as u64);
         }
@@ -627,15 +632,21 @@ impl<const D: usize> Sim<D> {
             };
         }
         let solve = if version >= 4 {
-            crate::VcSolve {
+            Some(crate::VcSolve {
                 tolerance: r.f64()?,
                 max_iterations: usize::try_from(r.u64()?)
                     .map_err(|_| corrupt("VC solve iteration count too large"))?,
-            }
+            })
         } else {
-            crate::VcSolve::EXACT
+            Some(crate::VcSolve::EXACT)
         };
-        sim.set_vc_solve(solve)?;
+        match solve {
+            Some(s) if version >= 5 && s.tolerance == 0.0 && s.max_iterations == 0 => {
+                sim.set_vc_solve_automatic()
+            }
+            Some(s) => sim.set_vc_solve(s)?,
+            None => {}
+        }
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
         }
@@ -747,10 +758,17 @@ mod tests {
     }
 
     /// Format 4 keeps the VC solve's stopping rule; a format-3 file, written when the exact
-    /// solve was the default, loads with it.
+    /// solve was the default, loads with it. Format 5 keeps whether the rule is the automatic
+    /// one (VC2 here, whose automatic rule is not the exact solve).
     #[test]
     fn the_vc_solve_rule_is_kept_from_format_4() {
         let mut sim = block();
+        sim.set_integration(crate::Integration::Vc { order: 2 })
+            .unwrap();
+        let automatic = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert!(automatic.vc_solve_is_automatic());
+        assert_eq!(automatic.vc_solve(), sim.vc_solve());
+        assert_ne!(sim.vc_solve(), crate::VcSolve::EXACT);
         let rule = crate::VcSolve {
             tolerance: 1e-6,
             max_iterations: 7,

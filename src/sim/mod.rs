@@ -145,8 +145,9 @@ pub struct Sim<const D: usize> {
     pub(crate) vc: Option<VcCorrection<D>>,
     /// Whether VC of order 1 subtracts the particles' linear fit ([`Sim::set_vc_linear_fit`]).
     vc_linear_fit: bool,
-    /// The stopping rule of VC's solve ([`Sim::set_vc_solve`]).
-    vc_solve: crate::VcSolve,
+    /// The stopping rule of VC's solve given to [`Sim::set_vc_solve`]; `None` for
+    /// [`crate::VcSolve::automatic`].
+    vc_solve: Option<crate::VcSolve>,
     pub(crate) time: f64,
     pub(crate) steps: u64,
     pub(crate) work: Workspace<D>,
@@ -181,7 +182,7 @@ impl<const D: usize> Sim<D> {
             surface: BoundaryPoints::default(),
             vc: None,
             vc_linear_fit: false,
-            vc_solve: crate::VcSolve::default(),
+            vc_solve: None,
             time: 0.0,
             steps: 0,
             work: Workspace::default(),
@@ -287,7 +288,7 @@ impl<const D: usize> Sim<D> {
             Integration::Vc { order } => {
                 let mut vc = VcCorrection::new(order)?;
                 vc.linear_fit = self.vc_linear_fit && self.options.shape.vc_linear_fit();
-                vc.solve = self.vc_solve;
+                vc.solve = self.vc_solve_of(order);
                 Some(vc)
             }
         };
@@ -315,23 +316,45 @@ impl<const D: usize> Sim<D> {
         Ok(())
     }
 
-    /// The stopping rule of VC's conservative solve (default: the exact solve, to a residual of
-    /// 1e-12 of the right-hand side's, [`crate::VcSolve::EXACT`]; kept by checkpoints). Linear
-    /// and angular momentum are conserved whatever the rule; a looser rule meets the divergence
-    /// equalities less exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
+    /// The stopping rule of VC's conservative solve (kept by checkpoints). Unless given one, a
+    /// simulation takes [`crate::VcSolve::automatic`] for its VC order and grid: the exact solve
+    /// (a residual of 1e-12 of the right-hand side's) at order 1, and at order ≥ 2 1e-4 on grids
+    /// of up to 32 cells across, falling as `(32 / N)^3` on wider ones. Linear and angular
+    /// momentum are conserved whatever the rule; a looser rule meets the divergence equalities
+    /// less exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
     /// stopping rule"). Refuses a tolerance outside `(0, 1]` and zero iterations.
     pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
         solve.check()?;
-        self.vc_solve = solve;
+        self.vc_solve = Some(solve);
         if let Some(vc) = &mut self.vc {
             vc.solve = solve;
         }
         Ok(())
     }
 
-    /// The stopping rule of VC's solve ([`Sim::set_vc_solve`]).
+    /// Returns to the rule a simulation takes unless given one ([`crate::VcSolve::automatic`]).
+    pub fn set_vc_solve_automatic(&mut self) {
+        self.vc_solve = None;
+        if let Some(vc) = &mut self.vc {
+            vc.solve = crate::VcSolve::automatic(vc.order, self.grid.cells_across());
+        }
+    }
+
+    /// The stopping rule of VC's solve in force ([`Sim::set_vc_solve`]): the one given, or the
+    /// automatic rule for the simulation's VC order (order 1 without VC) and grid.
     pub fn vc_solve(&self) -> crate::VcSolve {
+        let order = self.vc.as_ref().map_or(1, |vc| vc.order);
+        self.vc_solve_of(order)
+    }
+
+    /// Whether the solve follows the automatic rule (no rule given, [`Sim::set_vc_solve`]).
+    pub fn vc_solve_is_automatic(&self) -> bool {
+        self.vc_solve.is_none()
+    }
+
+    fn vc_solve_of(&self, order: u32) -> crate::VcSolve {
         self.vc_solve
+            .unwrap_or_else(|| crate::VcSolve::automatic(order, self.grid.cells_across()))
     }
 
     /// Chooses the velocity transfer. Before stepping only.

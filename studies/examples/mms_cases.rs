@@ -10,7 +10,9 @@
 //!   GRIDS      cells per side, comma-separated (16,32,64)
 //!   --mixed-walls  fixed walls on the low faces, slip walls on the high ones (slip everywhere
 //!                  without it)
-//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default the engine's: 1e-12, 2000)
+//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default the engine's automatic
+//!                                       rule, `rkmpm::VcSolve::automatic`; with one option, the exact
+//!                                       solve's value of the other: 1e-12, 2000)
 //! ```
 //!
 //! Prints the relative L2 and energy-norm errors and the run time per grid, and the L2 slope.
@@ -85,11 +87,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .transpose()
     };
-    let default = rkmpm::VcSolve::default();
-    let vc_solve = rkmpm::VcSolve {
-        tolerance: number("--vc-tolerance")?.unwrap_or(default.tolerance),
-        max_iterations: number("--vc-iterations")?.map_or(default.max_iterations, |n| n as usize),
-    };
+    // Without either option the engine's automatic rule; with one, the exact solve's value of
+    // the other.
+    let exact = rkmpm::VcSolve::EXACT;
+    let (tolerance, iterations) = (number("--vc-tolerance")?, number("--vc-iterations")?);
+    let vc_solve = (tolerance.is_some() || iterations.is_some()).then(|| rkmpm::VcSolve {
+        tolerance: tolerance.unwrap_or(exact.tolerance),
+        max_iterations: iterations.map_or(exact.max_iterations, |n| n as usize),
+    });
     let mms = AxisAlignedMms {
         walls,
         vc_solve,

@@ -29,8 +29,9 @@ pub struct AxisAlignedMms {
     pub poisson: f64,
     pub density: f64,
     pub walls: MmsWalls,
-    /// The stopping rule of VC's solve in the runs ([`rkmpm::VcSolve`]; default the engine's).
-    pub vc_solve: rkmpm::VcSolve,
+    /// The stopping rule of VC's solve in the runs ([`rkmpm::VcSolve`]); `None` for the
+    /// engine's automatic rule ([`rkmpm::VcSolve::automatic`]).
+    pub vc_solve: Option<rkmpm::VcSolve>,
 }
 
 /// The walls of the manufactured solution's box.
@@ -62,7 +63,7 @@ impl Default for AxisAlignedMms {
             poisson: 0.3,
             density: 1000.0,
             walls: MmsWalls::Slip,
-            vc_solve: rkmpm::VcSolve::default(),
+            vc_solve: None,
         }
     }
 }
@@ -361,7 +362,9 @@ pub fn run_mms_placed<const D: usize>(
     sim.set_shape(shape)?;
     sim.set_transfer(transfer)?;
     sim.set_integration(integration)?;
-    sim.set_vc_solve(mms.vc_solve)?;
+    if let Some(solve) = mms.vc_solve {
+        sim.set_vc_solve(solve)?;
+    }
     let (low, high) = mms.walls.faces();
     for a in 0..D {
         sim.set_wall(a, Side::Low, low)?;
