@@ -442,7 +442,31 @@ impl<const D: usize> VcCorrection<D> {
             let used = SharedSlice::new(&mut self.used);
             let nodes = &*nodes;
             let basis = &self.basis;
+            // Order 1: Q = 1 and ∇Q = 0, so the sums take neither a position nor the test
+            // function: A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I (the same values as the general
+            // sums below, without their per-particle buffers and divisions).
+            let first_order = |p: usize| {
+                let v = volumes[p];
+                stencils.for_each_shape(p, |_, s| {
+                    if !s.in_support() {
+                        return;
+                    }
+                    let slot = nodes.slot(s.node);
+                    // SAFETY: as below.
+                    unsafe {
+                        moment.range(slot, 1)[0] += v * s.value.abs();
+                        let r = xi.range(slot * D, D);
+                        for k in 0..D {
+                            r[k] -= v * s.gradient[k];
+                        }
+                        used.range(slot, 1)[0] = true;
+                    }
+                });
+            };
             by_colour(&|p| {
+                if m == 1 {
+                    return first_order(p);
+                }
                 let (mut q, mut dq) = ([0.0; MAX_BASIS], [0.0; 3 * MAX_BASIS]);
                 let v = volumes[p];
                 let phi = stencils.transfer_of(p);
