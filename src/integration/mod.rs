@@ -456,8 +456,8 @@ impl<const D: usize> VcCorrection<D> {
                     unsafe {
                         moment.range(slot, 1)[0] += v * s.value.abs();
                         let r = xi.range(slot * D, D);
-                        for k in 0..D {
-                            r[k] -= v * s.gradient[k];
+                        for (r, g) in r.iter_mut().zip(s.gradient.iter()) {
+                            *r -= v * g;
                         }
                         used.range(slot, 1)[0] = true;
                     }
