@@ -632,20 +632,18 @@ impl<const D: usize> Sim<D> {
             };
         }
         let solve = if version >= 4 {
-            Some(crate::VcSolve {
+            crate::VcSolve {
                 tolerance: r.f64()?,
                 max_iterations: usize::try_from(r.u64()?)
                     .map_err(|_| corrupt("VC solve iteration count too large"))?,
-            })
-        } else {
-            Some(crate::VcSolve::EXACT)
-        };
-        match solve {
-            Some(s) if version >= 5 && s.tolerance == 0.0 && s.max_iterations == 0 => {
-                sim.set_vc_solve_automatic()
             }
-            Some(s) => sim.set_vc_solve(s)?,
-            None => {}
+        } else {
+            crate::VcSolve::EXACT
+        };
+        if version >= 5 && solve.tolerance == 0.0 && solve.max_iterations == 0 {
+            sim.set_vc_solve_automatic();
+        } else {
+            sim.set_vc_solve(solve)?;
         }
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
