@@ -119,7 +119,8 @@ pub const VC_SOLVE_MAX_ITERATIONS: usize = 2000;
 /// exact solve's errors to 64 cells (docs/convergence/FINDINGS.md).
 pub const VC_SOLVE_HIGHER_ORDER_TOLERANCE: f64 = 1e-4;
 
-/// The grid width (cells across) up to which `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4) holds as it is.
+/// The grid width (cells across) up to which `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4) holds as
+/// it is.
 pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 
 /// The stopping rule of VC's conservative solve: conjugate gradients stop when the
@@ -162,8 +163,8 @@ impl VcSolve {
     /// The rule a simulation takes unless given one, for VC of `order` on a grid of
     /// `cells_across` cells along its widest axis: [`VcSolve::DEFAULT`] (the exact solve) at
     /// order 1; at order ≥ 2 `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4), times
-    /// `(32 / cells_across)^3` on grids wider than 32 cells (`VC_SOLVE_REFERENCE_CELLS`), never below the exact
-    /// solve's tolerance.
+    /// `(32 / cells_across)^3` on grids wider than 32 cells (`VC_SOLVE_REFERENCE_CELLS`), never
+    /// below the exact solve's tolerance.
     pub fn automatic(order: u32, cells_across: usize) -> VcSolve {
         if order < 2 {
             return VcSolve::DEFAULT;
@@ -443,8 +444,8 @@ impl<const D: usize> VcCorrection<D> {
             let nodes = &*nodes;
             let basis = &self.basis;
             // Order 1: Q = 1 and ∇Q = 0, so the sums take neither a position nor the test
-            // function: A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I (the same values as the general
-            // sums below, without their per-particle buffers and divisions).
+            // function: A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I. Higher orders take the general sums
+            // below.
             let first_order = |p: usize| {
                 let v = volumes[p];
                 stencils.for_each_shape(p, |_, s| {
@@ -477,16 +478,11 @@ impl<const D: usize> VcCorrection<D> {
                     // The test function: the transfer weight `Φ` where it differs from `Ψ`.
                     let test = phi.map_or(s.value, |phi| phi[k]);
                     let slot = nodes.slot(s.node);
-                    if m == 1 {
-                        // Order 1: Q = 1, ∇Q = 0 (no position needed).
-                        q[0] = 1.0;
-                    } else {
-                        let x_node = grid.node_position(grid.node_multi_index(s.node));
-                        let z = (positions[p] - x_node) / h;
-                        basis.values(&z, &mut q[..m]);
-                        for k in 0..D {
-                            basis.derivatives(&z, k, &mut dq[k * m..(k + 1) * m]);
-                        }
+                    let x_node = grid.node_position(grid.node_multi_index(s.node));
+                    let z = (positions[p] - x_node) / h;
+                    basis.values(&z, &mut q[..m]);
+                    for k in 0..D {
+                        basis.derivatives(&z, k, &mut dq[k * m..(k + 1) * m]);
                     }
                     // SAFETY: the slot belongs to a node that only this block writes in this
                     // colour (`Bins`); slots of different nodes are disjoint ranges.

@@ -326,17 +326,21 @@ impl<const D: usize> Sim<D> {
     pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
         solve.check()?;
         self.vc_solve = Some(solve);
-        if let Some(vc) = &mut self.vc {
-            vc.solve = solve;
-        }
+        self.apply_vc_solve();
         Ok(())
     }
 
     /// Returns to the rule a simulation takes unless given one ([`crate::VcSolve::automatic`]).
     pub fn set_vc_solve_automatic(&mut self) {
         self.vc_solve = None;
+        self.apply_vc_solve();
+    }
+
+    /// Hands the rule in force to the correction.
+    fn apply_vc_solve(&mut self) {
+        let solve = self.vc_solve();
         if let Some(vc) = &mut self.vc {
-            vc.solve = crate::VcSolve::automatic(vc.order, self.grid.cells_across());
+            vc.solve = solve;
         }
     }
 
