@@ -209,16 +209,43 @@ pub(crate) const VC_SOLVE_ATTAINABLE: f64 = 10.0;
 /// See [`VC_SOLVE_ATTAINABLE`].
 pub(crate) const VC_SOLVE_STAGNATION: usize = 10;
 
-/// The largest correction a node takes, in units of `1/h` (the norm of its coefficients `ζ_I`,
-/// written in `(x − x_I)/h`). A node that the particles barely reach while a surface point sees
-/// it has an equality the particles can meet only with a large coefficient on almost no mass.
-/// Under a uniform stress that is exact and balanced: the patch test's jittered box
-/// (`patch_test_uniform_stress_stays_uniform_with_vc`) needs up to `428 / h` at its edge nodes.
-/// On the granular column (B-spline 2 + VC1, 16 cells) such nodes reached `10^3`–`3·10^11 / h`,
-/// their forces were not balanced, and a particle next to one inverted. The bound sits between.
-/// It applies at order 1 only: at order 2 the same box's edge nodes need up to `6.7·10^3 / h`
-/// (`second_order_divergence_equality`), and no flow is known yet that fails at order 2.
+/// The largest correction any node takes at order 1, in units of `1/h` (the norm of its
+/// coefficients `ζ_I`, written in `(x − x_I)/h`). A node that the particles barely reach while
+/// a surface point sees it has an equality the particles can meet only with a large coefficient
+/// on almost no mass. Under a uniform stress that is exact and balanced: the patch test's
+/// jittered box (`patch_test_uniform_stress_stays_uniform_with_vc`) needs up to `428 / h` at its
+/// edge nodes. On the granular column (B-spline 2 + VC1, 16 cells) such nodes reached
+/// `10^3`–`3·10^11 / h`, their forces were not balanced, and a particle next to one inverted.
+/// The ceiling sits between; below it, a node's bound falls with its reach
+/// ([`first_order_correction_bound`]). It applies at order 1 only: at order 2 the same box's
+/// edge nodes need up to `6.7·10^3 / h` (`second_order_divergence_equality`), and no flow is
+/// known yet that fails at order 2.
 pub(crate) const VC_MAX_CORRECTION: f64 = 1e3;
+
+/// The largest correction, in units of `1/h`, of an order-1 node whose reach `A_I` is at least
+/// [`VC_EDGE_REACH`] of the largest: what the explicit step stays stable with. The corrected
+/// gradient stiffens its node: by Gershgorin's bound, the correction part of node `I`'s
+/// stiffness over its mass is about `c² g |ζ_I|` (`c` the wave speed, `g = Σ_J |∇Ψ_J| ≈ 1.5 / h`
+/// for the quadratic B-spline), so `ω Δt ≤ 2` at the Courant number `C = c Δt / h` needs
+/// `|ζ_I| h ≤ 4 / (C² g h)`: 30 at `C` = 0.3, 11 at 0.5. A node of smaller reach has a mass
+/// below the grid update's edge-mass floor (1 % of the largest), which divides its force by
+/// more than its mass, so its bound grows as `1 / A_I` up to [`VC_MAX_CORRECTION`]. Measured on
+/// the granular column (B-spline 2 + VC1, 16 cells): with the ceiling alone, nodes at the
+/// resting toe took corrections of `10^2`–`10^3 / h`, the velocities there grew by about 10 %
+/// a step from 0.05 to 26 m/s and a particle inverted (Courant 0.35 and 0.4 with the exact solve,
+/// 0.25 with 1e-4); with this bound all of them end (docs/convergence/FINDINGS.md). No error of
+/// the manufactured solution moves (every digit printed, RK1 + VC1 and B-spline 2 + VC1, 2D and
+/// 3D, jittered, found surface).
+pub(crate) const VC_STABLE_CORRECTION: f64 = 10.0;
+
+/// The bound on the norm of an order-1 node's coefficients, times `h`, for a node of reach
+/// `reach` (`A_I = Σ_p V_p |Ψ_I(x_p)|`) when the largest reach is `largest`:
+/// [`VC_STABLE_CORRECTION`], times `VC_EDGE_REACH · largest / reach` when that exceeds one,
+/// never above [`VC_MAX_CORRECTION`].
+pub(crate) fn first_order_correction_bound(reach: f64, largest: f64) -> f64 {
+    let edge = VC_EDGE_REACH * largest / reach;
+    (VC_STABLE_CORRECTION * edge.max(1.0)).min(VC_MAX_CORRECTION)
+}
 
 /// At order ≥ 2 the solve is of `(K + ε E A) ζ = rhs`: `A` the node blocks `A_I` (of a node
 /// corrected to order 1, its constant part), `E` the nodes at a body's edge (reach `A_I`'s
@@ -1018,13 +1045,16 @@ impl<const D: usize> VcCorrection<D> {
             null.remove_from_coefficients(&mut zeta);
         }
         self.iterations = iterations;
-        // At order 1, a node's correction bounded by `VC_MAX_CORRECTION / h` (see there); the
-        // fits are taken of the bounded coefficients, so the gradients still sum to zero.
+        // At order 1, a node's correction bounded (`first_order_correction_bound`); the fits
+        // are taken of the bounded coefficients, so the gradients still sum to zero.
         if m == 1 {
-            zeta.par_chunks_exact_mut(D).for_each(|z| {
+            let moment = &self.moment;
+            let largest = moment.iter().fold(0.0, |a: f64, &b| a.max(b));
+            zeta.par_chunks_exact_mut(D).enumerate().for_each(|(s, z)| {
                 let size = z.iter().map(|x| x * x).sum::<f64>().sqrt() * h;
-                if size > VC_MAX_CORRECTION {
-                    z.iter_mut().for_each(|x| *x *= VC_MAX_CORRECTION / size);
+                let bound = first_order_correction_bound(moment[s], largest);
+                if size > bound {
+                    z.iter_mut().for_each(|x| *x *= bound / size);
                 }
             });
         }

@@ -19,7 +19,7 @@
 
 use crate::grid::{EdgeLumping, Grid, GridNodes};
 use crate::integration::{
-    VC_EDGE_DAMPING_FLOOR, VC_EDGE_REACH, VC_MAX_CORRECTION, VC_REGULARISATION,
+    first_order_correction_bound, VC_EDGE_DAMPING_FLOOR, VC_EDGE_REACH, VC_REGULARISATION,
 };
 use crate::material::{block, embed3, pressure, Constitutive};
 use crate::options::{Shape, Transfer};
@@ -356,9 +356,11 @@ fn vc_corrections_first_order<const D: usize>(
             zeta[i][c] = scale[i] * y[i];
         }
     }
-    for z in zeta.iter_mut() {
-        if z.norm() * h > VC_MAX_CORRECTION {
-            *z *= VC_MAX_CORRECTION / (z.norm() * h);
+    let largest = a.iter().fold(0.0, |l: f64, &a| l.max(a));
+    for (z, &a) in zeta.iter_mut().zip(&a) {
+        let bound = first_order_correction_bound(a, largest);
+        if z.norm() * h > bound {
+            *z *= bound / (z.norm() * h);
         }
     }
     let mut corrections: Vec<Vec<Vector<D>>> = all_stencils

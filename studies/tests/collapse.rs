@@ -164,12 +164,12 @@ fn low_column_keeps_its_top() {
 }
 
 /// VC on a flow whose surface breaks up: quadratic B-spline + VC1, a = 2 at 16 cells, the
-/// surface found from the particles at every step (about 7 minutes in release on 2 cores). It
-/// needs the bound on the correction (`VC_MAX_CORRECTION`): nodes the particles barely reach got
-/// coefficients up to 3e11 / h, and a particle next to one inverted. Measured: run-out 6.28
-/// (law 6.30), height 0.824 (law 0.887). **Fragile:** the same column inverts a particle at CFL
-/// 0.35 (t = 0.78 s) and, at CFL 0.3, with the VC solve stopped at 1e-4 or 1e-6 of its
-/// right-hand side (t = 1.10 s, 0.86 s; docs/convergence/FINDINGS.md). Asserted: the
+/// surface found from the particles at every step (about 2 minutes in release on 2 cores). It
+/// needs the bounds on the correction: nodes the particles barely reach got coefficients up to
+/// 3e11 / h, and a particle next to one inverted; under the ceiling alone (1e3 / h) the resting
+/// toe grew unstable at Courant numbers 0.35 and 0.4, and at 0.25 with the solve stopped at 1e-4
+/// (docs/convergence/FINDINGS.md, "A stable bound on VC1's correction"). Measured: run-out 6.28
+/// (law 6.30), height 0.824 (law 0.887). Asserted: the
 /// run ends, [`settled_inside_the_measured_band`], and the last surface closed (its area-weighted
 /// normals sum to zero to round-off) and between 0.9 and 2 times the heap's outline in length
 /// (a voxel staircase is longer than the slope it follows; holes would make it much longer).
