@@ -46,7 +46,7 @@ module rkmpm
    ! The stopping rule of VC's solve of order 1 in a new simulation (sim%set_vc_solve changes
    ! it); at order >= 2 the automatic rule, 1e-4 falling as (32 / N)^3 on grids N > 32 cells
    ! across (sim%vc_solve reports the rule in force).
-   real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-12_c_double
+   real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-4_c_double
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
 
    ! enum RkmpmStatus (a C enum: int-sized)
@@ -1330,7 +1330,7 @@ contains
    end function sim_max_steps_per_advance
 
    !> The stopping rule of VC's solve: tolerance in (0, 1] of the right-hand side's residual
-   !> (default 1e-12, the exact solve), at most max_iterations (>= 1) iterations.
+   !> (default 1e-4 at order 1; 1e-12 is the exact solve), at most max_iterations (>= 1) iterations.
    subroutine sim_set_vc_solve(self, tolerance, max_iterations, stat, errmsg)
       class(rkmpm_sim), intent(inout) :: self
       real(c_double), intent(in) :: tolerance

