@@ -160,9 +160,9 @@ impl VcSolve {
     };
 
     /// The rule a simulation takes unless given one, for VC of `order` on a grid of
-    /// `cells_across` cells along its widest axis: [`VcSolve::DEFAULT`] (1e-4) at order 1; at order ≥ 2 `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4), times
-    /// `(32 / cells_across)^3` on grids wider than 32 cells (`VC_SOLVE_REFERENCE_CELLS`), never
-    /// below the exact solve's tolerance.
+    /// `cells_across` cells along its widest axis: [`VcSolve::DEFAULT`] (1e-4) at order 1; at
+    /// order ≥ 2 `VC_SOLVE_HIGHER_ORDER_TOLERANCE` (1e-4), times `(32 / cells_across)^3` on grids
+    /// wider than 32 cells (`VC_SOLVE_REFERENCE_CELLS`), never below the exact solve's tolerance.
     pub fn automatic(order: u32, cells_across: usize) -> VcSolve {
         if order < 2 {
             return VcSolve::DEFAULT;
@@ -228,10 +228,10 @@ pub(crate) const VC_MAX_CORRECTION: f64 = 1e3;
 /// `|ζ_I| h ≤ 4 / (C² g h)`: 30 at `C` = 0.3, 11 at 0.5. A node of smaller reach has a mass
 /// below the grid update's edge-mass floor (1 % of the largest), which divides its force by
 /// more than its mass, so its bound grows as `1 / A_I` up to [`VC_MAX_CORRECTION`]. Measured on
-/// the granular column (B-spline 2 + VC1, 16 cells): with the ceiling alone, nodes at the
-/// resting toe took corrections of `10^2`–`10^3 / h`, the velocities there grew by about 10 %
-/// a step from 0.05 to 26 m/s and a particle inverted (Courant 0.35 and 0.4 with the exact solve,
-/// 0.25 with 1e-4); with this bound all of them end (docs/convergence/FINDINGS.md). No error of
+/// the granular column (B-spline 2 + VC1, 16 cells): with the ceiling alone, the velocities at
+/// the resting toe grew by about 10 % a step from 0.05 to 26 m/s and a particle inverted
+/// (Courant 0.35 and 0.4 with the exact solve, 0.25 with 1e-4); with a flat bound of `10 / h`,
+/// and with this one, all of them end (docs/convergence/FINDINGS.md). No error of
 /// the manufactured solution moves (every digit printed, RK1 + VC1 and B-spline 2 + VC1, 2D and
 /// 3D, jittered, found surface).
 pub(crate) const VC_STABLE_CORRECTION: f64 = 10.0;
