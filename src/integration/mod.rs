@@ -349,6 +349,9 @@ pub struct VcCorrection<const D: usize> {
     /// Solves `K ζ = rhs` at order ≥ 2 without the damping `VC_REGULARISATION`.
     #[cfg(test)]
     undamped: bool,
+    /// Whether the last solve took its bodies from the operator's lattice neighbours.
+    #[cfg(test)]
+    lattice_bodies: bool,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -380,6 +383,8 @@ impl<const D: usize> VcCorrection<D> {
             multilevel: false,
             #[cfg(test)]
             undamped: false,
+            #[cfg(test)]
+            lattice_bodies: false,
         })
     }
 
@@ -746,17 +751,25 @@ impl<const D: usize> VcCorrection<D> {
             true => WEAK_REACH * moment.iter().copied().fold(0.0, f64::max),
             false => 0.0,
         };
-        let body_of = bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
-            if counted(p) {
-                stencils.for_each_shape(p, |_, s| {
-                    if s.in_support() {
-                        let slot = nodes.slot(s.node);
-                        if weak == 0.0 || moment[slot] >= weak {
-                            visit(slot);
+        // Where every support is a box, from the assembled operator (`NodeOperator::bodies`).
+        let from_lattice = operator.filter(|_| weak == 0.0).and_then(|o| o.bodies());
+        #[cfg(test)]
+        {
+            self.lattice_bodies = from_lattice.is_some();
+        }
+        let body_of = from_lattice.unwrap_or_else(|| {
+            bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
+                if counted(p) {
+                    stencils.for_each_shape(p, |_, s| {
+                        if s.in_support() {
+                            let slot = nodes.slot(s.node);
+                            if weak == 0.0 || moment[slot] >= weak {
+                                visit(slot);
+                            }
                         }
-                    }
-                });
-            }
+                    });
+                }
+            })
         });
         let exps = self.basis.exponents();
         let degree = match m {

@@ -50,6 +50,28 @@ struct BoxBatch {
     live: Vec<bool>,
 }
 
+/// At order 1 with the linear fit, the particles of one bin whose stencils are the same box of
+/// nodes (in practice the `2^D` particles nearest one node), up to this many at a time:
+/// [`FactoredBatch`].
+const FACTORED_BATCH: usize = 8;
+
+/// The particles of one box stencil gathered for [`NodeOperator::assemble`] at order 1 with the
+/// linear fit. A particle's block `c_p w_Ip w_Jp (1 + W_p u_Ip·u_Jp)` is the sum of `D + 1`
+/// products `a_Ip a_Jp`, `a = √c_p w` and `a = √(c_p W_p) w u_k`: the batch's blocks are the
+/// dot products of its `(D + 1) n` columns, one update of a row's memory per batch.
+struct FactoredBatch {
+    /// The box's first node (`usize::MAX` when empty), and how many columns the batch holds.
+    first: usize,
+    columns: usize,
+    /// The columns (at most `FACTORED_BATCH (D + 1)`), each a value per stencil slot (zero
+    /// off the support).
+    a: Vec<f64>,
+    /// Per stencil slot: its node's row (valid where `live`), and whether any particle of the
+    /// batch has the node in its support.
+    row: Vec<usize>,
+    live: Vec<bool>,
+}
+
 /// The buffers of an assembled `K` (its packed rows and their lattice layout), handed from
 /// one step's operator to the next so that their pages are mapped once (a fresh allocation of
 /// tens of MB a step faults every page in again: a tenth of a 3D VC step).
@@ -91,6 +113,10 @@ pub(crate) struct NodeOperator<const D: usize> {
     lattice: Option<LatticeRows>,
     /// A buffer for the lattice layout's values.
     spare: Vec<f64>,
+    /// On the fine level, when every particle's support is a box of nodes with positive
+    /// weights: per row, the slot of its lattice neighbour one node up each axis where a
+    /// particle joins the two (`u32::MAX` where none does). See [`NodeOperator::bodies`].
+    joined: Option<Vec<[u32; D]>>,
 }
 
 /// The lattice step of every entry of a row's room of `(2 radius + 1)^D` blocks, entry `e`
@@ -195,6 +221,11 @@ impl<const D: usize> NodeOperator<D> {
         } = storage;
         dense.clear();
         dense.resize(slots * block * mm, 0.0);
+        // At order 1 the columns a particle adds to a factored batch: `√c w`, and with the
+        // linear fit `√(c W) w u_k` too.
+        let per = if frame_offset.is_some() { D + 1 } else { 1 };
+        // Whether every particle's support is a box of nodes with positive weights.
+        let boxes = std::sync::atomic::AtomicBool::new(true);
         {
             let rows = SharedSlice::new(&mut dense);
             for colour in &bins.colours {
@@ -204,19 +235,16 @@ impl<const D: usize> NodeOperator<D> {
                     let mut key = vec![0isize; len];
                     let mut q = vec![0.0; len * m];
                     let mut u = vec![crate::Vector::<D>::zeros(); len];
-                    // At order ≥ 2 the bin's particles by their stencil's first node (then
-                    // index), so that the particles of one stencil come in a row and are
-                    // assembled as a batch.
+                    // The bin's particles by their stencil's first node (then index), so that
+                    // the particles of one stencil come in a row and are assembled as a batch.
                     let mut particles: Vec<(usize, usize)> = bins.order
                         [bins.occupied[b as usize].1.clone()]
                     .iter()
                     .map(|&p| p as usize)
                     .filter(|&p| counted(p))
-                    .map(|p| (if m > 1 { stencils.of(p).0[0] } else { 0 }, p))
+                    .map(|p| (stencils.of(p).0[0], p))
                     .collect();
-                    if m > 1 {
-                        particles.sort_unstable();
-                    }
+                    particles.sort_unstable();
                     let mut batch = (m > 1).then(|| BoxBatch {
                         nodes: vec![0; len],
                         n: 0,
@@ -226,6 +254,46 @@ impl<const D: usize> NodeOperator<D> {
                         key: vec![0; len],
                         live: vec![false; len],
                     });
+                    let capacity = FACTORED_BATCH * per;
+                    let mut factored = (m == 1).then(|| FactoredBatch {
+                        first: usize::MAX,
+                        columns: 0,
+                        a: vec![0.0; len * capacity],
+                        row: vec![0; len],
+                        live: vec![false; len],
+                    });
+                    // Adds the factored batch's blocks to its rows (each pair's dot product once,
+                    // to both its rows) and empties it.
+                    let mut sums = vec![0.0; len];
+                    let mut flush_factored = |batch: &mut FactoredBatch| {
+                        let n = batch.columns;
+                        if n == 0 {
+                            return;
+                        }
+                        for i in (0..len).filter(|&i| batch.live[i]) {
+                            // Row i's blocks with the whole box, `Σ_k a_ik a_jk`, as runs along
+                            // axis 0 (a slot off every support adds +0, which changes no sum).
+                            sums.fill(0.0);
+                            for column in batch.a.chunks_exact(len).take(n) {
+                                let ai = column[i];
+                                for (t, &aj) in sums.iter_mut().zip(column) {
+                                    *t += ai * aj;
+                                }
+                            }
+                            // SAFETY: as below.
+                            let r = unsafe { rows.range(batch.row[i] * block, block) };
+                            let base = (centre as isize - box_key[i]) as usize;
+                            for (run, t) in sums.chunks_exact(width).enumerate() {
+                                let e = base + box_key[run * width] as usize;
+                                for (r, &t) in r[e..e + width].iter_mut().zip(t) {
+                                    *r += t;
+                                }
+                            }
+                        }
+                        batch.columns = 0;
+                        batch.first = usize::MAX;
+                        batch.live.fill(false);
+                    };
                     let mut uc = vec![0.0; m * ASSEMBLY_BATCH];
                     // Adds the batch's blocks to its rows and empties it.
                     let mut flush = |batch: &mut BoxBatch| {
@@ -280,23 +348,34 @@ impl<const D: usize> NodeOperator<D> {
                             continue;
                         }
                         let in_box = (0..len).all(|s| ns[s] == ns[0] + box_step[s]);
+                        let unweighted =
+                            |s: usize| w[s] == 0.0 && crate::shape::in_support(vs[s], &gs[s]);
+                        if !in_box || (0..len).any(unweighted) {
+                            boxes.store(false, std::sync::atomic::Ordering::Relaxed);
+                        }
                         let c = volumes[p] / total;
-                        if in_box && m == 1 && frame_offset.is_none() {
-                            // The mean fit on a box: each row takes the particle's weights as
-                            // runs along axis 0, `r_I[J − I] += c w_I w_J` (a weight of zero
-                            // adds +0, which leaves every sum as it is).
-                            for i in (0..len).filter(|&i| w[i] != 0.0) {
-                                let ci = c * w[i];
-                                // SAFETY: as below.
-                                let r = unsafe { rows.range(row[i] * block, block) };
-                                let base = (centre as isize - box_key[i]) as usize;
-                                for (run, wj) in w.chunks_exact(width).enumerate() {
-                                    let e = base + box_key[run * width] as usize;
-                                    for (r, &wj) in r[e..e + width].iter_mut().zip(wj) {
-                                        *r += ci * wj;
+                        if let Some(batch) = factored.as_mut().filter(|_| in_box) {
+                            if batch.columns + per > capacity || batch.first != ns[0] {
+                                flush_factored(batch);
+                            }
+                            batch.first = ns[0];
+                            let (root_c, root_cw) = (c.sqrt(), (c * total).sqrt());
+                            let a = &mut batch.a[batch.columns * len..][..per * len];
+                            for s in 0..len {
+                                if w[s] == 0.0 {
+                                    for k in 0..per {
+                                        a[k * len + s] = 0.0;
                                     }
+                                    continue;
+                                }
+                                batch.live[s] = true;
+                                batch.row[s] = row[s];
+                                a[s] = root_c * w[s];
+                                for k in 1..per {
+                                    a[k * len + s] = root_cw * w[s] * u[s][k - 1];
                                 }
                             }
+                            batch.columns += per;
                             continue;
                         }
                         if in_box {
@@ -374,6 +453,9 @@ impl<const D: usize> NodeOperator<D> {
                     if let Some(batch) = batch.as_mut() {
                         flush(batch);
                     }
+                    if let Some(batch) = factored.as_mut() {
+                        flush_factored(batch);
+                    }
                 });
             }
         }
@@ -383,13 +465,22 @@ impl<const D: usize> NodeOperator<D> {
         column.clear();
         column.resize(slots * block, 0);
         let mut value = dense;
+        // The lattice neighbours one node up each axis that a particle joins to the row.
+        let up: [usize; D] = std::array::from_fn(|a| centre + span.pow(a as u32));
+        let mut joined = vec![[u32::MAX; D]; slots];
         count
             .par_iter_mut()
             .zip(column.par_chunks_mut(block))
             .zip(value.par_chunks_mut(block * mm))
+            .zip(joined.par_iter_mut())
             .enumerate()
-            .for_each(|(slot, ((count, column), row))| {
+            .for_each(|(slot, (((count, column), row), joined))| {
                 let node = nodes.active[slot] as isize;
+                for (joined, &e) in joined.iter_mut().zip(&up) {
+                    if row[e * mm..(e + 1) * mm].iter().any(|&x| x != 0.0) {
+                        *joined = nodes.slot((node + step[e]) as usize) as u32;
+                    }
+                }
                 let mut k = 0;
                 for e in 0..block {
                     if e != centre && row[e * mm..(e + 1) * mm].iter().all(|&x| x == 0.0) {
@@ -448,6 +539,7 @@ impl<const D: usize> NodeOperator<D> {
             (count, column, value),
         );
         operator.spare = laid;
+        operator.joined = boxes.into_inner().then_some(joined);
         Some(operator)
     }
 
@@ -479,7 +571,29 @@ impl<const D: usize> NodeOperator<D> {
             value,
             lattice: None,
             spare: Vec::new(),
+            joined: None,
         }
+    }
+
+    /// The connected bodies of the rows that particles join, numbered as
+    /// [`super::bodies`] numbers them, from the rows' lattice neighbours: when every support is
+    /// a box, two nodes share a particle exactly when a chain of neighbours one node apart, each
+    /// pair sharing a particle, joins them (a box is joined along its axes), so this visits `D`
+    /// pairs a row instead of every particle's stencil. `None` unless [`NodeOperator::assemble`]
+    /// found every support a box.
+    pub fn bodies(&self) -> Option<Vec<usize>> {
+        let joined = self.joined.as_ref()?;
+        let rows = self.rows();
+        Some(super::bodies(
+            rows,
+            rows,
+            |i, visit: &mut dyn FnMut(usize)| {
+                visit(i);
+                for &j in joined[i].iter().filter(|&&j| j != u32::MAX) {
+                    visit(j as usize);
+                }
+            },
+        ))
     }
 
     /// Lays the rows out on their lattice box for the products, at order 1 where they fill

@@ -567,6 +567,46 @@ fn boundary_points_follow_an_affine_motion_exactly() {
     }
 }
 
+/// Where every support is a box, the solve takes its bodies from the assembled operator's
+/// lattice neighbours (`NodeOperator::bodies`): the same numbers per slot as the particles'
+/// stencils give, on the jittered box alone and beside a second body more than a support away.
+#[test]
+fn bodies_from_the_lattice_are_those_of_the_particles() {
+    fn check<const D: usize>(shape: Shape, apart: bool) {
+        let mut sim = jittered_box_on::<D>(20, shape, Some(1), 0.4);
+        if apart {
+            // 2^D particles in [0.04, 0.07]^D: their nodes lie below 0.2, the box's above 0.2.
+            let x: Vec<Vector<D>> = (0..1usize << D)
+                .map(|k| Vector::<D>::from_fn(|a, _| 0.04 + 0.03 * ((k >> a) & 1) as f64))
+                .collect();
+            sim.add_particles(0, &x, &vec![1e-4; x.len()], None)
+                .unwrap();
+        }
+        let (grid, ps, volumes) = prepare_stencils(&mut sim);
+        let lattice = correction(&mut sim, &grid, &ps, &volumes, 1, Solve::Auto);
+        assert!(
+            lattice.lattice_bodies,
+            "{shape:?} {D}D: bodies from the lattice"
+        );
+        let particles = correction(&mut sim, &grid, &ps, &volumes, 1, Solve::MatrixFree);
+        assert!(!particles.lattice_bodies);
+        assert_eq!(lattice.bodies(), particles.bodies(), "{shape:?} {D}D");
+        // The particles' nodes make one body per cluster.
+        let mut found: Vec<usize> = (0..ps.len())
+            .flat_map(|p| sim.work.stencils.of(p).0.to_vec())
+            .map(|n| lattice.bodies()[sim.work.nodes.slot(n)])
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        assert_eq!(found.len(), 1 + apart as usize, "{shape:?} {D}D");
+    }
+    for apart in [false, true] {
+        check::<2>(Shape::BSpline2, apart);
+        check::<3>(Shape::BSpline2, apart);
+        check::<2>(Shape::BSpline3, apart);
+    }
+}
+
 /// The bodies of the slots that particles join are the connected components, numbered by their
 /// first slot, whatever the number of threads (each thread's forest is merged): slots 0–9,
 /// particles joining (0, 3), (3, 7), (1, 2), (8, 9), (2, 8) and one alone at 5; slots 4 and 6
