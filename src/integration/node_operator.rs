@@ -1081,6 +1081,15 @@ impl<const D: usize> NodeOperator<D> {
         let span = 2 * radius + 1;
         let block = span.pow(D as u32);
         let centre = (block - 1) / 2;
+        // An aggregate's place on the lattice of coarse rows, `Σ_k index_k span^k`, so that the
+        // entry of aggregates (a, b) is `place_b − place_a + centre`; per row of this level,
+        // its aggregate's (`None` for a row without one).
+        let on_rows =
+            |key: &[i64; D]| -> i64 { (0..D).map(|k| key[k] * span.pow(k as u32) as i64).sum() };
+        let row_place: Vec<Option<i64>> = parent
+            .iter()
+            .map(|&b| (b != u32::MAX).then(|| on_rows(&index[b as usize])))
+            .collect();
         // Per aggregate `a`, `Σ_{i in a} Σ_j P_iᵀ K_ij P_j` over its rows in row order (the
         // same sums whatever the threads).
         let mut dense = vec![0.0; coarse * block * mcc];
@@ -1089,20 +1098,16 @@ impl<const D: usize> NodeOperator<D> {
             .enumerate()
             .for_each(|(a, row)| {
                 let mut vp = vec![0.0; m * mc];
-                let ia = index[a];
+                let base = centre as i64 - on_rows(&index[a]);
                 for &i in children_of(a) {
                     let start = i * self.block;
                     let n = self.count[i] as usize;
                     for e in 0..n {
                         let j = self.column[start + e] as usize;
-                        let b = parent[j];
-                        if b == u32::MAX {
+                        let Some(at) = row_place[j] else {
                             continue;
-                        }
-                        let ib = index[b as usize];
-                        let key: usize = (0..D)
-                            .map(|k| (ib[k] - ia[k] + radius as i64) as usize * span.pow(k as u32))
-                            .sum();
+                        };
+                        let key = (base + at) as usize;
                         let v = &self.value[(start + e) * mm..(start + e + 1) * mm];
                         let out = &mut row[key * mcc..][..mcc];
                         if mc == 1 {
