@@ -50,15 +50,18 @@ struct BoxBatch {
     live: Vec<bool>,
 }
 
-/// At order 1 with the linear fit, the particles of one bin whose stencils are the same box of
-/// nodes (in practice the `2^D` particles nearest one node), up to this many at a time:
-/// [`FactoredBatch`].
+/// At order 1, the particles of one bin whose stencils are the same box of nodes (in practice
+/// the `2^D` particles nearest one node of a quadratic B-spline, or of one cell of a cubic one),
+/// up to this many at a time: [`FactoredBatch`].
 const FACTORED_BATCH: usize = 8;
 
-/// The particles of one box stencil gathered for [`NodeOperator::assemble`] at order 1 with the
-/// linear fit. A particle's block `c_p w_Ip w_Jp (1 + W_p u_Ip·u_Jp)` is the sum of `D + 1`
-/// products `a_Ip a_Jp`, `a = √c_p w` and `a = √(c_p W_p) w u_k`: the batch's blocks are the
-/// dot products of its `(D + 1) n` columns, one update of a row's memory per batch.
+/// The particles of one box stencil gathered for [`NodeOperator::assemble`] at order 1. A
+/// particle's block is `c_p w_Ip w_Jp` with the mean fit, one product `a_Ip a_Jp` of the column
+/// `a = √c_p w`; with the linear fit `c_p w_Ip w_Jp (1 + W_p u_Ip·u_Jp)`, the sum of `D + 1`,
+/// the columns `√c_p w` and `√(c_p W_p) w u_k`. The batch's blocks are the sums of its columns'
+/// products: each row takes them with the whole box at once, one update of the row's memory per
+/// batch instead of one per particle (3D `bspline2` + VC1, 10^5 particles: the particles' pass
+/// 80 → 52 ms; in 2D, with 4 particles a batch, 12.8 → 14.6 ms).
 struct FactoredBatch {
     /// The box's first node (`usize::MAX` when empty), and how many columns the batch holds.
     first: usize,
@@ -262,8 +265,7 @@ impl<const D: usize> NodeOperator<D> {
                         row: vec![0; len],
                         live: vec![false; len],
                     });
-                    // Adds the factored batch's blocks to its rows (each pair's dot product once,
-                    // to both its rows) and empties it.
+                    // Adds the factored batch's blocks to its rows and empties it.
                     let mut sums = vec![0.0; len];
                     let mut flush_factored = |batch: &mut FactoredBatch| {
                         let n = batch.columns;
