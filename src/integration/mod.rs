@@ -673,12 +673,14 @@ impl<const D: usize> VcCorrection<D> {
             let (t, o) = &frame[p];
             t * offset(p, n) - o
         };
-        // The edge nodes and their damping `d_I` of `(K + ε E A) ζ` at order ≥ 2
-        // (`VC_REGULARISATION`), with the floor `VC_EDGE_DAMPING_FLOOR`.
+        // The largest reach (the moment's constant entry), which the edge nodes, the weak
+        // nodes and the order-1 bound are taken against.
         let reach = (0..slots)
             .filter(|&slot| used[slot])
             .map(|slot| moment[slot * m * m])
             .fold(0.0, f64::max);
+        // The edge nodes and their damping `d_I` of `(K + ε E A) ζ` at order ≥ 2
+        // (`VC_REGULARISATION`), with the floor `VC_EDGE_DAMPING_FLOOR`.
         let mut edge = std::mem::take(&mut self.edge);
         edge.clear();
         edge.extend((0..slots).map(|slot| {
@@ -748,7 +750,7 @@ impl<const D: usize> VcCorrection<D> {
         // does not carry the iterates along it (projected conjugate gradients).
         // With the linear fit, nodes the particles barely reach (`WEAK_REACH`) join no body.
         let weak = match linear_fit {
-            true => WEAK_REACH * moment.iter().copied().fold(0.0, f64::max),
+            true => WEAK_REACH * reach,
             false => 0.0,
         };
         // Where every support is a box, from the assembled operator (`NodeOperator::bodies`).
@@ -1060,10 +1062,9 @@ impl<const D: usize> VcCorrection<D> {
         // are taken of the bounded coefficients, so the gradients still sum to zero.
         if m == 1 {
             let moment = &self.moment;
-            let largest = moment.iter().fold(0.0, |a: f64, &b| a.max(b));
             zeta.par_chunks_exact_mut(D).enumerate().for_each(|(s, z)| {
                 let size = z.iter().map(|x| x * x).sum::<f64>().sqrt() * h;
-                let bound = first_order_correction_bound(moment[s], largest);
+                let bound = first_order_correction_bound(moment[s], reach);
                 if size > bound {
                     z.iter_mut().for_each(|x| *x *= bound / size);
                 }

@@ -168,8 +168,8 @@ fn low_column_keeps_its_top() {
 /// needs the bounds on the correction: nodes the particles barely reach got coefficients up to
 /// 3e11 / h, and a particle next to one inverted; under the ceiling alone (1e3 / h) the resting
 /// toe grew unstable at Courant numbers 0.35 and 0.4, and at 0.25 with the solve stopped at 1e-4
-/// (docs/convergence/FINDINGS.md, "A stable bound on VC1's correction"). Measured: run-out 6.28
-/// (law 6.30), height 0.824 (law 0.887). Asserted: the
+/// (docs/convergence/FINDINGS.md, "A stable bound on VC1's correction"). Measured: run-out 6.66
+/// (law 6.30), height 0.822 (law 0.887). Asserted: the
 /// run ends, [`settled_inside_the_measured_band`], and the last surface closed (its area-weighted
 /// normals sum to zero to round-off) and between 0.9 and 2 times the heap's outline in length
 /// (a voxel staircase is longer than the slope it follows; holes would make it much longer).
