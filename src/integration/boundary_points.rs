@@ -170,31 +170,61 @@ impl<const D: usize> BoundaryPoints<D> {
         deformation_gradients: &[Matrix<D>],
     ) -> (Vec<Vector<D>>, Vec<Vector<D>>) {
         let root = |x: f64| if D == 2 { x.sqrt() } else { x.cbrt() };
-        // Per particle: the half side of its domain in reference coordinates and its current
-        // spacing (the map back to reference coordinates is recomputed where it is needed).
-        // The root of a volume repeated from the particle before (a lattice's) is not taken
-        // again, nor that of `J = 1`: `cbrt` is about as costly as the rest of a particle here.
-        let mut halves = vec![0.0; positions.len()];
-        let mut spacing = vec![0.0; positions.len()];
-        halves
-            .par_chunks_mut(PARTICLE_CHUNK)
-            .zip(spacing.par_chunks_mut(PARTICLE_CHUNK))
-            .zip(reference_volumes.par_chunks(PARTICLE_CHUNK))
-            .zip(deformation_gradients.par_chunks(PARTICLE_CHUNK))
-            .for_each(|(((halves, spacing), volumes), fs)| {
-                let (mut last, mut s) = (f64::NAN, f64::NAN);
-                for (((half, spacing), &v0), f) in
-                    halves.iter_mut().zip(spacing).zip(volumes).zip(fs)
-                {
-                    if v0.to_bits() != last.to_bits() {
-                        (last, s) = (v0, root(v0));
-                    }
-                    let j = crate::determinant(f).abs();
-                    *half = SURFACE_DOMAIN_SCALE * 0.5 * s;
-                    *spacing = s * if j == 1.0 { 1.0 } else { root(j) };
+        // A particle's domain: the half side of its cell in reference coordinates and the
+        // bounding box of the cell as carried by `F`. The root of a volume repeated from the
+        // particle before (a lattice's) is not taken again: `cbrt` is about as costly as the
+        // rest of a particle here. Nothing is stored per particle: the domains are taken again
+        // where the voxels are marked.
+        let domains = |chunk: usize| {
+            let range = chunk * PARTICLE_CHUNK..((chunk + 1) * PARTICLE_CHUNK).min(positions.len());
+            let (mut last, mut s) = (f64::NAN, f64::NAN);
+            range.map(move |p| {
+                let (x, f, v0) = (
+                    &positions[p],
+                    &deformation_gradients[p],
+                    reference_volumes[p],
+                );
+                if v0.to_bits() != last.to_bits() {
+                    (last, s) = (v0, root(v0));
                 }
-            });
-        let target = SURFACE_DOMAIN_SCALE * 0.5 * spacing.iter().copied().fold(0.0, f64::max);
+                let half = SURFACE_DOMAIN_SCALE * 0.5 * s;
+                let extent = Vector::<D>::from_fn(|a, _| {
+                    half * (0..D).map(|b| f[(a, b)].abs()).sum::<f64>()
+                });
+                (p, half, (x - extent, x + extent))
+            })
+        };
+        let chunks = positions.len().div_ceil(PARTICLE_CHUNK);
+        // Over all particles: the largest and the summed current volume `|J| V⁰` (the current
+        // spacing's root is taken once, of the largest) and the box of all domains.
+        let infinite = Vector::<D>::repeat(f64::INFINITY);
+        let parts: Vec<(f64, f64, Vector<D>, Vector<D>)> = (0..chunks)
+            .into_par_iter()
+            .map(|chunk| {
+                let (mut largest, mut total, mut lo, mut hi) = (0.0f64, 0.0, infinite, -infinite);
+                for (p, _, domain) in domains(chunk) {
+                    let volume =
+                        crate::determinant(&deformation_gradients[p]).abs() * reference_volumes[p];
+                    largest = largest.max(volume);
+                    total += volume;
+                    lo = lo.inf(&domain.0);
+                    hi = hi.sup(&domain.1);
+                }
+                (largest, total, lo, hi)
+            })
+            .collect();
+        let (largest, total, lower, higher) = parts.iter().fold(
+            (0.0f64, 0.0, infinite, -infinite),
+            |(largest, total, lo, hi), part| {
+                (
+                    largest.max(part.0),
+                    total + part.1,
+                    lo.inf(&part.2),
+                    hi.sup(&part.3),
+                )
+            },
+        );
+        let target = SURFACE_DOMAIN_SCALE * 0.5 * root(largest);
         if !(target > 0.0 && target.is_finite()) {
             return (Vec::new(), Vec::new());
         }
@@ -209,58 +239,62 @@ impl<const D: usize> BoundaryPoints<D> {
         // the work for a particle stretched far.
         let last: [i64; D] =
             std::array::from_fn(|a| ((upper[a] - origin[a]) / v - 0.5).floor() as i64);
-        // Each particle's range of voxels: its domain's bounding box, cut to the domain.
-        let ranges: Vec<([i64; D], [i64; D])> = positions
-            .par_iter()
-            .zip(deformation_gradients)
-            .zip(&halves)
-            .map(|((x, f), &half)| {
-                let extent: [f64; D] =
-                    std::array::from_fn(|a| half * (0..D).map(|b| f[(a, b)].abs()).sum::<f64>());
-                let lo = std::array::from_fn(|a| {
-                    ceil_index((x[a] - extent[a] - origin[a]) / v - 0.5).max(0)
-                });
-                let hi = std::array::from_fn(|a| {
-                    crate::floor_index((x[a] + extent[a] - origin[a]) / v - 0.5).min(last[a])
-                });
-                (lo, hi)
-            })
-            .collect();
+        // A domain's range of voxels: those whose centres its bounding box holds, cut to the
+        // grid's box.
+        let range = |(lo, hi): &(Vector<D>, Vector<D>)| -> ([i64; D], [i64; D]) {
+            (
+                std::array::from_fn(|a| ceil_index((lo[a] - origin[a]) / v - 0.5).max(0)),
+                std::array::from_fn(|a| {
+                    crate::floor_index((hi[a] - origin[a]) / v - 0.5).min(last[a])
+                }),
+            )
+        };
         // The body's voxels: the centres inside some particle's domain, visited row by row
         // along axis 0 (the reference coordinates of the next centre are one step away).
-        let voxels_of = |p: usize, visited: &mut Vec<[i64; D]>| {
-            let (lo, hi) = ranges[p];
-            let half = halves[p];
-            let to_reference = deformation_gradients[p]
-                .try_inverse()
-                .unwrap_or_else(Matrix::zeros);
-            let count: [usize; D] = std::array::from_fn(|a| (hi[a] - lo[a] + 1).max(0) as usize);
-            let step = to_reference.column(0) * v;
-            for row in 0..count[1..].iter().product::<usize>() {
-                let mut k = lo;
-                let mut r = row;
-                for a in 1..D {
-                    k[a] += (r % count[a]) as i64;
-                    r /= count[a];
+        let voxels_of = |chunk: usize, visited: &mut Vec<([i64; D], u64)>| {
+            for (p, half, domain) in domains(chunk) {
+                let (lo, hi) = range(&domain);
+                if (0..D).any(|a| lo[a] > hi[a]) {
+                    continue;
                 }
-                let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
-                let mut xi = to_reference * (centre - positions[p]);
-                for _ in 0..count[0] {
-                    if xi.iter().all(|c| c.abs() <= half) {
-                        visited.push(k);
+                let to_reference = deformation_gradients[p]
+                    .try_inverse()
+                    .unwrap_or_else(Matrix::zeros);
+                let step = to_reference.column(0) * v;
+                // The rows' first voxels, counted along axes 1.. (no divisions); per row of up
+                // to 64 voxels, the bits of those inside, without branches.
+                let mut k = lo;
+                loop {
+                    let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
+                    let mut xi = to_reference * (centre - positions[p]);
+                    let mut j = k;
+                    while j[0] <= hi[0] {
+                        let run = (hi[0] - j[0] + 1).min(64);
+                        let mut bits = 0u64;
+                        for t in 0..run {
+                            let inside = xi.iter().all(|c| c.abs() <= half);
+                            bits |= (inside as u64) << t;
+                            xi += step;
+                        }
+                        if bits != 0 {
+                            visited.push((j, bits));
+                        }
+                        j[0] += run;
                     }
-                    xi += step;
-                    k[0] += 1;
+                    let Some(a) = (1..D).find(|&a| k[a] < hi[a]) else {
+                        break;
+                    };
+                    k[a] += 1;
+                    k[1..a].copy_from_slice(&lo[1..a]);
                 }
             }
         };
-        let mut body = VoxelSet::of(&ranges, voxels_of);
+        let mut body = VoxelSet::of(positions.len(), range(&(lower, higher)), voxels_of);
+        let mean_volume = total / positions.len().max(1) as f64;
         // Gaps between neighbouring particles that their domains leave (jittered or stretched
         // particles) are holes narrower than a particle; their faces would put surface points
         // inside the body. Fill every enclosed hole that lies within half a particle's mean
         // spacing of the body.
-        let mean_volume =
-            spacing.iter().map(|s| s.powi(D as i32)).sum::<f64>() / spacing.len().max(1) as f64;
         let reach = (0.5 * root(mean_volume) / v).round().max(1.0) as usize;
         body.fill_narrow_holes(&last, reach);
         // Faces merged by twos per tangential axis (when a half cell holds an even number of
@@ -270,7 +304,6 @@ impl<const D: usize> BoundaryPoints<D> {
         // the voxels that is one face per particle face; the normals still sum to zero. The
         // points keep the faces' fixed order.
         let full = 1usize << (D - 1);
-        let exposed = |k: &[i64; D], a: usize, sign: i64| body.exposed(k, a, sign);
         // A face (centre in voxel units, side `width` voxels along each tangential axis) as its
         // 2^{D−1} two-point Gauss points, each with its share of the area: exact for the
         // polynomial pieces of the shape functions on the face.
@@ -297,48 +330,27 @@ impl<const D: usize> BoundaryPoints<D> {
             })
         };
         let found: Vec<(Vector<D>, Vector<D>)> = body
-            .exposed_faces()
+            .exposed_faces(merge)
             .into_par_iter()
-            .flat_map_iter(|(k, a, sign)| {
+            .flat_map_iter(|(k, a, sign, width)| {
                 let normal = k[a] as f64 + 0.5 + 0.5 * sign as f64;
-                let first: [i64; D] =
-                    std::array::from_fn(|b| if b == a { k[b] } else { k[b].div_euclid(2) * 2 });
-                let grouped = merge
-                    && (0..full).all(|m| {
-                        // Member m: bit t of m offsets the t-th tangential axis.
-                        let mut member = first;
-                        for (t, b) in (0..D).filter(|&b| b != a).enumerate() {
-                            member[b] += ((m >> t) & 1) as i64;
-                        }
-                        exposed(&member, a, sign)
-                    });
-                let face = if !grouped {
-                    let centre =
-                        std::array::from_fn(|b| if b == a { normal } else { k[b] as f64 + 0.5 });
-                    Some((centre, 1.0))
-                } else if k == first {
-                    // Centre of the block's side: 2g + 1 voxels along each tangential axis.
-                    let centre = std::array::from_fn(|b| {
-                        if b == a {
-                            normal
-                        } else {
-                            first[b] as f64 + 1.0
-                        }
-                    });
-                    Some((centre, 2.0))
-                } else {
-                    None
-                };
-                face.into_iter()
-                    .flat_map(move |(centre, width)| points(centre, a, sign, width))
+                // A group's face is centred on its block's side: `2g + 1` voxels along each
+                // tangential axis.
+                let centre = std::array::from_fn(|b| match (b == a, width) {
+                    (true, _) => normal,
+                    (false, 1) => k[b] as f64 + 0.5,
+                    (false, _) => k[b] as f64 + 1.0,
+                });
+                points(centre, a, sign, width as f64)
             })
             .collect();
         found.into_iter().unzip()
     }
 }
 
-/// A voxel face: the voxel (or a group of voxels), the axis of its normal and the side (±1).
-type Face<const D: usize> = ([i64; D], usize, i64);
+/// A voxel face: the voxel (the first of a group), the axis of its normal, the side (±1) and its
+/// width in voxels along each tangential axis (2 for a group).
+type Face<const D: usize> = ([i64; D], usize, i64, u8);
 
 /// The voxels of a body (integer indices): a dense map of the box the particles' voxel ranges
 /// span when it holds at most `DENSE_VOXELS_PER_PARTICLE` voxels per particle (linear time,
@@ -358,46 +370,44 @@ enum VoxelSet<const D: usize> {
 const DENSE_VOXELS_PER_PARTICLE: usize = 64;
 
 impl<const D: usize> VoxelSet<D> {
-    /// The voxels `voxels_of(p, list)` appends to `list` for each particle `p`, all within its
-    /// range `lo..=hi` of `ranges`.
+    /// The voxels `voxels_of(chunk, list)` appends to `list` for each chunk of
+    /// `PARTICLE_CHUNK` of the `particles` (as runs along axis 0: the first voxel and a bit per
+    /// voxel from it), all within the box `lo..=hi` of voxel indices (every particle's range).
     fn of(
-        ranges: &[([i64; D], [i64; D])],
-        voxels_of: impl Fn(usize, &mut Vec<[i64; D]>) + Sync,
+        particles: usize,
+        (lo, hi): ([i64; D], [i64; D]),
+        voxels_of: impl Fn(usize, &mut Vec<([i64; D], u64)>) + Sync,
     ) -> Self {
-        let mut first = [i64::MAX; D];
-        let mut end = [i64::MIN; D];
-        for (lo, hi) in ranges
-            .iter()
-            .filter(|(lo, hi)| (0..D).all(|a| lo[a] <= hi[a]))
-        {
-            // One empty layer around the ranges: every neighbour of a body voxel is in the box.
-            for a in 0..D {
-                first[a] = first[a].min(lo[a] - 1);
-                end[a] = end[a].max(hi[a] + 2);
-            }
-        }
-        if (0..D).any(|a| first[a] >= end[a]) {
+        // One empty layer around the ranges: every neighbour of a body voxel is in the box.
+        let first: [i64; D] = std::array::from_fn(|a| lo[a] - 1);
+        let end: [i64; D] = std::array::from_fn(|a| hi[a] + 2);
+        let chunks = particles.div_ceil(PARTICLE_CHUNK);
+        if particles == 0 || (0..D).any(|a| lo[a] > hi[a]) {
             return VoxelSet::Sparse(Vec::new());
         }
         let dims: [usize; D] = std::array::from_fn(|a| (end[a] - first[a]) as usize);
         let total = dims
             .iter()
             .try_fold(1usize, |t, &d| t.checked_mul(d))
-            .filter(|&t| t <= DENSE_VOXELS_PER_PARTICLE * ranges.len());
+            .filter(|&t| t <= DENSE_VOXELS_PER_PARTICLE * particles);
         match total {
             Some(total) => {
                 let marked: Vec<AtomicBool> = (0..total).map(|_| AtomicBool::new(false)).collect();
-                let index = |k: &[i64; D]| dense_index(&first, &dims, k);
-                (0..ranges.len())
+                (0..chunks)
                     .into_par_iter()
-                    .for_each_init(Vec::new, |list, p| {
+                    .for_each_init(Vec::new, |list, chunk| {
                         list.clear();
-                        voxels_of(p, list);
-                        for k in list.iter() {
-                            // Every visited voxel lies in its particle's range, so in the box.
-                            // Only ever set: the map does not depend on the threads' order.
-                            if let Some(i) = index(k) {
-                                marked[i].store(true, Ordering::Relaxed);
+                        voxels_of(chunk, list);
+                        for (k, bits) in list.iter() {
+                            // Every visited voxel lies in the box. Only ever set: the map does
+                            // not depend on the threads' order.
+                            if let Some(i) = dense_index(&first, &dims, k) {
+                                let mut bits = *bits;
+                                while bits != 0 {
+                                    marked[i + bits.trailing_zeros() as usize]
+                                        .store(true, Ordering::Relaxed);
+                                    bits &= bits - 1;
+                                }
                             }
                         }
                     });
@@ -405,12 +415,18 @@ impl<const D: usize> VoxelSet<D> {
                 VoxelSet::Dense { first, dims, body }
             }
             None => {
-                let mut voxels: Vec<[i64; D]> = (0..ranges.len())
+                let mut voxels: Vec<[i64; D]> = (0..chunks)
                     .into_par_iter()
-                    .flat_map_iter(|p| {
-                        let mut list = Vec::new();
-                        voxels_of(p, &mut list);
-                        list
+                    .flat_map_iter(|chunk| {
+                        let mut runs = Vec::new();
+                        voxels_of(chunk, &mut runs);
+                        runs.into_iter().flat_map(|(k, bits)| {
+                            (0..64).filter(move |t| (bits >> t) & 1 == 1).map(move |t| {
+                                let mut k = k;
+                                k[0] += t;
+                                k
+                            })
+                        })
                     })
                     .collect();
                 voxels.par_sort_unstable();
@@ -561,16 +577,44 @@ impl<const D: usize> VoxelSet<D> {
         }
     }
 
-    /// The faces between the body and empty voxels: `(voxel, axis, ±1)`, in a fixed order
-    /// (storage order for the map, sorted order for the list).
-    fn exposed_faces(&self) -> Vec<Face<D>> {
+    /// The faces between the body and empty voxels, in a fixed order (storage order for the
+    /// map, sorted order for the list). With `merge`, the `2^{D−1}` faces of one side of a block
+    /// of voxels `2g, 2g + 1` across (per tangential axis) that are all exposed are one face of
+    /// width 2, listed where its first member (even tangential indices) is; the other members
+    /// are left out.
+    fn exposed_faces(&self, merge: bool) -> Vec<Face<D>> {
+        // An exposed face's width, or none for a merged group's member other than its first:
+        // `member(t)` is whether the group's member offset by `t` from its first (bit per
+        // tangential axis) is exposed, `own` that offset for the face's voxel.
+        let face_width = |k: &[i64; D], a: usize, member: &dyn Fn(usize, usize) -> bool| {
+            if !merge {
+                return Some(1);
+            }
+            let own = (0..D)
+                .filter(|&b| b != a)
+                .enumerate()
+                .fold(0, |m, (t, b)| m | ((k[b].rem_euclid(2) as usize) << t));
+            match (0..1 << (D - 1)).all(|t| member(own, t)) {
+                false => Some(1),
+                true => (own == 0).then_some(2),
+            }
+        };
         let faces_of = |k: [i64; D], out: &mut Vec<Face<D>>| {
             for a in 0..D {
                 for sign in [-1i64, 1] {
                     let mut n = k;
                     n[a] += sign;
                     if !self.contains(&n) {
-                        out.push((k, a, sign));
+                        let member = |own: usize, t: usize| {
+                            let mut m = k;
+                            for (bit, b) in (0..D).filter(|&b| b != a).enumerate() {
+                                m[b] += ((t >> bit) & 1) as i64 - ((own >> bit) & 1) as i64;
+                            }
+                            self.exposed(&m, a, sign)
+                        };
+                        if let Some(w) = face_width(&k, a, &member) {
+                            out.push((k, a, sign, w));
+                        }
                     }
                 }
             }
@@ -616,19 +660,37 @@ impl<const D: usize> VoxelSet<D> {
                             (true, _) => &body[base + strides[a]..][..width],
                         }
                     });
+                    // Whether each voxel and its neighbours are all in the body, without branches.
+                    let [b0, b1, b2, b3] = beside.map(|row| &row[..width]);
+                    let (before, after) = (&cells[..width - 2], &cells[2..]);
                     for k0 in 1..width - 1 {
-                        if !cells[k0]
-                            || (cells[k0 - 1] && cells[k0 + 1] && beside.iter().all(|row| row[k0]))
-                        {
+                        let inner =
+                            before[k0 - 1] & after[k0 - 1] & b0[k0] & b1[k0] & b2[k0] & b3[k0];
+                        if !cells[k0] || inner {
                             continue;
                         }
                         k[0] = first[0] + k0 as i64;
                         let i = base + k0;
-                        for (a, stride) in strides.iter().enumerate() {
+                        for (a, &stride) in strides.iter().enumerate() {
                             for sign in [-1i64, 1] {
-                                let n = if sign < 0 { i - stride } else { i + stride };
-                                if !body[n] {
-                                    out.push((k, a, sign));
+                                let beyond =
+                                    |i: usize| if sign < 0 { i - stride } else { i + stride };
+                                if body[beyond(i)] {
+                                    continue;
+                                }
+                                // A body voxel is off the map's outer layer, so are its
+                                // neighbours' indices, and a member in the body has its
+                                // neighbour beyond the face in the map.
+                                let member = |own: usize, t: usize| {
+                                    let mut m = i;
+                                    for (bit, b) in (0..D).filter(|&b| b != a).enumerate() {
+                                        m = m + ((t >> bit) & 1) * strides[b]
+                                            - ((own >> bit) & 1) * strides[b];
+                                    }
+                                    body[m] && !body[beyond(m)]
+                                };
+                                if let Some(w) = face_width(&k, a, &member) {
+                                    out.push((k, a, sign, w));
                                 }
                             }
                         }
