@@ -261,8 +261,8 @@ impl<const D: usize> BoundaryPoints<D> {
                     .try_inverse()
                     .unwrap_or_else(Matrix::zeros);
                 let step = to_reference.column(0) * v;
-                // The rows' first voxels, counted along axes 1.. (no divisions); per row of up
-                // to 64 voxels, the bits of those inside, without branches.
+                // The rows' first voxels, counted along axes 1.. (no divisions); per run of up
+                // to 64 voxels along a row, a bit for each voxel inside.
                 let mut k = lo;
                 loop {
                     let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
