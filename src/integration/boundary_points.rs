@@ -251,7 +251,7 @@ impl<const D: usize> BoundaryPoints<D> {
         };
         // The body's voxels: the centres inside some particle's domain, visited row by row
         // along axis 0 (the reference coordinates of the next centre are one step away).
-        let voxels_of = |chunk: usize, visited: &mut Vec<([i64; D], u64)>| {
+        let voxels_of = |chunk: usize, visited: &mut Vec<[i64; D]>| {
             for (p, half, domain) in domains(chunk) {
                 let (lo, hi) = range(&domain);
                 if (0..D).any(|a| lo[a] > hi[a]) {
@@ -261,25 +261,18 @@ impl<const D: usize> BoundaryPoints<D> {
                     .try_inverse()
                     .unwrap_or_else(Matrix::zeros);
                 let step = to_reference.column(0) * v;
-                // The rows' first voxels, counted along axes 1.. (no divisions); per run of up
-                // to 64 voxels along a row, a bit for each voxel inside.
+                // The rows' first voxels, counted along axes 1.. (no divisions).
                 let mut k = lo;
                 loop {
                     let centre = Vector::<D>::from_fn(|a, _| origin[a] + (k[a] as f64 + 0.5) * v);
                     let mut xi = to_reference * (centre - positions[p]);
                     let mut j = k;
                     while j[0] <= hi[0] {
-                        let run = (hi[0] - j[0] + 1).min(64);
-                        let mut bits = 0u64;
-                        for t in 0..run {
-                            let inside = xi.iter().all(|c| c.abs() <= half);
-                            bits |= (inside as u64) << t;
-                            xi += step;
+                        if xi.iter().all(|c| c.abs() <= half) {
+                            visited.push(j);
                         }
-                        if bits != 0 {
-                            visited.push((j, bits));
-                        }
-                        j[0] += run;
+                        xi += step;
+                        j[0] += 1;
                     }
                     let Some(a) = (1..D).find(|&a| k[a] < hi[a]) else {
                         break;
@@ -371,12 +364,12 @@ const DENSE_VOXELS_PER_PARTICLE: usize = 64;
 
 impl<const D: usize> VoxelSet<D> {
     /// The voxels `voxels_of(chunk, list)` appends to `list` for each chunk of
-    /// `PARTICLE_CHUNK` of the `particles` (as runs along axis 0: the first voxel and a bit per
-    /// voxel from it), all within the box `lo..=hi` of voxel indices (every particle's range).
+    /// `PARTICLE_CHUNK` of the `particles`, all within the box `lo..=hi` of voxel indices (every
+    /// particle's range).
     fn of(
         particles: usize,
         (lo, hi): ([i64; D], [i64; D]),
-        voxels_of: impl Fn(usize, &mut Vec<([i64; D], u64)>) + Sync,
+        voxels_of: impl Fn(usize, &mut Vec<[i64; D]>) + Sync,
     ) -> Self {
         // One empty layer around the ranges: every neighbour of a body voxel is in the box.
         let first: [i64; D] = std::array::from_fn(|a| lo[a] - 1);
@@ -398,16 +391,11 @@ impl<const D: usize> VoxelSet<D> {
                     .for_each_init(Vec::new, |list, chunk| {
                         list.clear();
                         voxels_of(chunk, list);
-                        for (k, bits) in list.iter() {
+                        for k in list.iter() {
                             // Every visited voxel lies in the box. Only ever set: the map does
                             // not depend on the threads' order.
                             if let Some(i) = dense_index(&first, &dims, k) {
-                                let mut bits = *bits;
-                                while bits != 0 {
-                                    marked[i + bits.trailing_zeros() as usize]
-                                        .store(true, Ordering::Relaxed);
-                                    bits &= bits - 1;
-                                }
+                                marked[i].store(true, Ordering::Relaxed);
                             }
                         }
                     });
@@ -418,15 +406,9 @@ impl<const D: usize> VoxelSet<D> {
                 let mut voxels: Vec<[i64; D]> = (0..chunks)
                     .into_par_iter()
                     .flat_map_iter(|chunk| {
-                        let mut runs = Vec::new();
-                        voxels_of(chunk, &mut runs);
-                        runs.into_iter().flat_map(|(k, bits)| {
-                            (0..64).filter(move |t| (bits >> t) & 1 == 1).map(move |t| {
-                                let mut k = k;
-                                k[0] += t;
-                                k
-                            })
-                        })
+                        let mut list = Vec::new();
+                        voxels_of(chunk, &mut list);
+                        list
                     })
                     .collect();
                 voxels.par_sort_unstable();
