@@ -275,7 +275,8 @@ type Visitor<'a, const D: usize> = dyn FnMut(usize, StencilNode<D>, Vector<D>) +
 
 /// Every stencil node with a nonzero value or gradient lies in the box of
 /// `ShapeFunction::stencil_origin` and `stencil_width` (the coloured particle-to-grid map writes
-/// only there), and the 1D factors of B-splines give the stored values bit for bit.
+/// only there), and the 1D factors of B-splines (and of RK1 with ã = 2) give the stored values
+/// bit for bit, read as factors or filled into the lists (`Stencils::fill_from_factors`).
 fn check_stencil_box<const D: usize>(shape: Shape) {
     let f = shape.build::<D>().unwrap();
     let grid = grid_for::<D>(f.as_ref());
@@ -304,11 +305,9 @@ fn check_stencil_box<const D: usize>(shape: Shape) {
             }
         }
     }
-    let order = match shape {
-        Shape::Linear => BSplineOrder::Linear,
-        Shape::BSpline2 => BSplineOrder::Quadratic,
-        Shape::BSpline3 => BSplineOrder::Cubic,
-        Shape::Rk { .. } => return,
+    // Every shape that is a B-spline on the lattice (RK1 with ã = 2 too).
+    let Some(order) = f.tensor_order() else {
+        return;
     };
     let mut stored = Stencils::<D>::default();
     stored.compute(f.as_ref(), &grid, &pts);
@@ -331,6 +330,23 @@ fn check_stencil_box<const D: usize>(shape: Shape) {
         ($w:literal) => {{
             let mut t = TensorStencils::<D, $w>::default();
             t.compute(&BSpline::new(order), &grid, &pts);
+            // The lists filled from the factors are the evaluated ones, bit for bit.
+            let mut filled = Stencils::<D>::default();
+            filled.fill_from_factors(&t);
+            let bits = |s: &Stencils<D>| {
+                let g: Vec<u64> = s
+                    .gradients
+                    .iter()
+                    .flat_map(|g| g.map(f64::to_bits).iter().copied().collect::<Vec<_>>())
+                    .collect();
+                (
+                    s.len,
+                    s.nodes.clone(),
+                    s.values.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    g,
+                )
+            };
+            assert_eq!(bits(&filled), bits(&stored), "{shape:?}");
             let t = t.local();
             check(&|p, f| {
                 t.for_each(p, |s, node| {

@@ -315,8 +315,11 @@ impl<const D: usize> Step<'_, D> {
         };
         let mut stencils = std::mem::take(storage(self.work));
         stencils.lanes = Lanes::chosen(self.fast_paths.vector_instructions);
-        // MLS reads no shape-function gradient, except for the mass gradient of contact.
-        let derivatives = self.options.transfer != Transfer::Mls || self.options.contact.is_some();
+        // MLS reads no shape-function gradient, except for the mass gradient of contact and
+        // VC's sums.
+        let derivatives = self.options.transfer != Transfer::Mls
+            || self.options.contact.is_some()
+            || self.vc.is_some();
         // The particles' blocks are found with the factors, from their stencils' first nodes.
         let layout = BlockLayout::new(W, self.grid);
         let (grid, position) = (&self.grid, &self.particles.position);
@@ -340,7 +343,9 @@ impl<const D: usize> Step<'_, D> {
             .then(|| std::mem::take(&mut self.work.stencils));
         if let Some(stored) = stored.as_mut() {
             stored.lanes = stencils.lanes;
-            stored.compute(self.shape, self.grid, &self.particles.position);
+            // The shape is the B-spline of width `W` on the lattice (`tensor_order`): its
+            // lists from the factors just computed, not evaluated again.
+            stored.fill_from_factors(&stencils);
             self.work.times.shape += lap(&mut clock);
         }
         let result = self.phases(dt, &stencils.local(), stored.as_ref());
