@@ -238,9 +238,8 @@ impl<const D: usize> Stencils<D> {
     }
 
     /// The lists of B-spline stencils of width `W` from their factors (`factors` computed with
-    /// derivatives): the nodes, values and gradients [`BSpline`]'s `evaluate` gives, multiplied
-    /// in the same order from the same factors, so the same bits, without evaluating the shape
-    /// again.
+    /// derivatives), as [`TensorView`] visits them: the nodes, values and gradients
+    /// [`BSpline`]'s `evaluate` gives, the same bits, without evaluating the shape again.
     pub fn fill_from_factors<const W: usize>(&mut self, factors: &TensorStencils<D, W>) {
         assert_eq!(
             factors.derivatives.len(),
@@ -253,14 +252,7 @@ impl<const D: usize> Stencils<D> {
         self.nodes.resize(total, 0);
         self.values.resize(total, 0.0);
         self.gradients.resize(total, Vector::zeros());
-        // The storage step of each slot of the box from its first node (axis 0 fastest).
-        let step: Vec<usize> = (0..len)
-            .map(|s| {
-                (0..D)
-                    .map(|a| (s / W.pow(a as u32)) % W * factors.strides[a])
-                    .sum()
-            })
-            .collect();
+        let view = factors.local();
         const CHUNK: usize = 256;
         self.nodes
             .par_chunks_mut(len * CHUNK)
@@ -274,24 +266,9 @@ impl<const D: usize> Stencils<D> {
                         .zip(gs.chunks_exact_mut(len)),
                 );
                 for (p, ((ns, ws), gs)) in particles {
-                    let mut base = factors.zero_index as i64;
-                    for (&i, &stride) in factors.first[p].iter().zip(&factors.strides) {
-                        base += i64::from(i) * stride as i64;
-                    }
-                    let base = base as usize;
-                    let (w, dw) = (&factors.values[p], &factors.derivatives[p]);
-                    let mut k = [0usize; D];
-                    for s in 0..len {
-                        ns[s] = base + step[s];
-                        (ws[s], gs[s]) = tensor_product(w, dw, &k);
-                        for kk in k.iter_mut() {
-                            *kk += 1;
-                            if *kk < W {
-                                break;
-                            }
-                            *kk = 0;
-                        }
-                    }
+                    view.for_each(p, |s, node| {
+                        (ns[s], ws[s], gs[s]) = (node.node, node.value, node.gradient);
+                    });
                 }
             });
         self.transfer.clear();
