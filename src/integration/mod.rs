@@ -303,6 +303,70 @@ pub struct VcInputs<'a, const D: usize> {
     pub body: Option<(&'a [u32], u32)>,
 }
 
+/// Every particle's support in the terms of the solve at order ≥ 2 applied matrix-free: per
+/// stencil slot its node's slot, `w_Ip = |Ψ_I(x_p)|` and `Q_I(x_p)`, found once per solve. The
+/// products read them instead of evaluating the polynomials at the node positions again (3D
+/// RK2 + VC2, whose `K` is too large to assemble).
+#[derive(Debug, Clone, Default)]
+struct Supports {
+    /// Stencil slots per particle and test polynomials per node.
+    len: usize,
+    m: usize,
+    /// Per particle and stencil slot: the node's slot, `Supports::OFF` off the support.
+    slot: Vec<u32>,
+    weight: Vec<f64>,
+    /// `m` values per particle and stencil slot.
+    q: Vec<f64>,
+}
+
+impl Supports {
+    const OFF: u32 = u32::MAX;
+
+    /// `node(p, n, q)` writes `Q` of the node `n` in the support of particle `p` and returns
+    /// its slot, or `None` for a particle the solve leaves out.
+    fn fill<const D: usize>(
+        &mut self,
+        particles: usize,
+        stencils: &Stencils<D>,
+        m: usize,
+        node: impl Fn(usize, usize, &mut [f64]) -> Option<usize> + Sync,
+    ) {
+        let len = stencils.len;
+        (self.len, self.m) = (len, m);
+        self.slot.resize(particles * len, Self::OFF);
+        self.weight.resize(particles * len, 0.0);
+        self.q.resize(particles * len * m, 0.0);
+        self.slot
+            .par_chunks_exact_mut(len)
+            .zip(self.weight.par_chunks_exact_mut(len))
+            .zip(self.q.par_chunks_exact_mut(len * m))
+            .enumerate()
+            .for_each(|(p, ((slot, weight), q))| {
+                slot.fill(Self::OFF);
+                stencils.for_each_shape(p, |k, s| {
+                    if s.in_support() {
+                        if let Some(found) = node(p, s.node, &mut q[k * m..(k + 1) * m]) {
+                            slot[k] = found as u32;
+                            weight[k] = s.value.abs();
+                        }
+                    }
+                });
+            });
+    }
+
+    /// Calls `f(slot, w_Ip, Q_I(x_p))` for every node in the support of particle `p`.
+    #[inline]
+    fn for_each(&self, p: usize, mut f: impl FnMut(usize, f64, &[f64])) {
+        let r = p * self.len..(p + 1) * self.len;
+        for (k, (&slot, &w)) in self.slot[r.clone()].iter().zip(&self.weight[r]).enumerate() {
+            if slot != Self::OFF {
+                let q = &self.q[(p * self.len + k) * self.m..][..self.m];
+                f(slot as usize, w, q);
+            }
+        }
+    }
+}
+
 /// The per-node gradient corrections of one step.
 #[derive(Debug, Clone)]
 pub struct VcCorrection<const D: usize> {
@@ -328,6 +392,8 @@ pub struct VcCorrection<const D: usize> {
     frame: Vec<(Matrix<D>, Vector<D>)>,
     /// The last step's storage of the assembled `K`, reused (its pages already mapped).
     storage: OperatorStorage,
+    /// At order ≥ 2 applied matrix-free: the particles' supports in the solve's terms.
+    supports: Supports,
     /// Per slot, the connected body of the nodes that the field's particles join (see
     /// [`bodies`]), when the solve took every such node (the mean fit; with the linear fit
     /// weakly reached nodes join no body): the bodies whose torque the step removes, so that
@@ -373,6 +439,7 @@ impl<const D: usize> VcCorrection<D> {
             fit: Vec::new(),
             frame: Vec::new(),
             storage: OperatorStorage::default(),
+            supports: Supports::default(),
             body_of: Vec::new(),
             linear_fit: false,
             solve: VcSolve::default(),
@@ -720,6 +787,17 @@ impl<const D: usize> VcCorrection<D> {
                 Multilevel::new(fine, cycle, basis.exponents(), reduced, reach)
             });
         let operator = multilevel.as_ref().map(|m| m.fine());
+        // Applied matrix-free at order ≥ 2: the supports found once, for every product.
+        let mut supports = std::mem::take(&mut self.supports);
+        let matrix_free = operator.is_none() && m > 1;
+        if matrix_free {
+            supports.fill(positions.len(), stencils, m, |p, n, q| {
+                counted(p).then(|| {
+                    q_of(p, n, q);
+                    nodes.slot(n)
+                })
+            });
+        }
         // The V-cycle, until a breakdown (below) turns to the node blocks.
         let with_multilevel =
             std::cell::Cell::new(multilevel.as_ref().is_some_and(|m| m.has_cycle()));
@@ -814,6 +892,22 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 let mut q = [0.0; MAX_BASIS];
                 let mut weight = 0.0;
+                // `μ_p += w_Jp ζ_J·Q_J(x_p)` at order ≥ 2.
+                let add = |mu: &mut Vector<D>, w: f64, z: &[f64], q: &[f64]| {
+                    for k in 0..D {
+                        mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
+                    }
+                };
+                if matrix_free {
+                    supports.for_each(p, |slot, w, q| {
+                        weight += w;
+                        add(mu, w, &zeta[slot * m * D..], q);
+                    });
+                    if weight > 0.0 {
+                        *mu /= weight;
+                    }
+                    return;
+                }
                 stencils.for_each_shape(p, |_, s| {
                     if !s.in_support() {
                         return;
@@ -830,9 +924,7 @@ impl<const D: usize> VcCorrection<D> {
                         return;
                     }
                     q_of(p, s.node, &mut q);
-                    for k in 0..D {
-                        mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
-                    }
+                    add(mu, w, z, &q);
                 });
                 if weight > 0.0 {
                     *mu /= weight;
@@ -869,6 +961,22 @@ impl<const D: usize> VcCorrection<D> {
                         }
                         let v = volumes[p];
                         let (mu, slope) = &fit[p];
+                        // `−V_p w_Ip Q_I(x_p) μ_p` at order ≥ 2.
+                        let sub = |o: &mut [f64], v: f64, q: &[f64]| {
+                            for k in 0..D {
+                                for j in 0..m {
+                                    o[k * m + j] -= v * q[j] * mu[k];
+                                }
+                            }
+                        };
+                        if matrix_free {
+                            supports.for_each(p, |slot, w, q| {
+                                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                                let o = unsafe { shared.range(slot * m * D, m * D) };
+                                sub(o, v * w, q);
+                            });
+                            continue;
+                        }
                         stencils.for_each_shape(p, |_, s| {
                             if !s.in_support() {
                                 return;
@@ -887,11 +995,7 @@ impl<const D: usize> VcCorrection<D> {
                                 return;
                             }
                             q_of(p, s.node, &mut q);
-                            for k in 0..D {
-                                for j in 0..m {
-                                    o[k * m + j] -= v * q[j] * mu[k];
-                                }
-                            }
+                            sub(o, v, &q);
                         });
                     }
                 });
@@ -1076,6 +1180,7 @@ impl<const D: usize> VcCorrection<D> {
         self.frame = frame;
         self.edge = edge;
         self.xi = zeta;
+        self.supports = supports;
         if let Some(multilevel) = multilevel {
             self.storage = multilevel.into_storage();
         }
