@@ -755,7 +755,8 @@ const SMOOTHING_SWEEPS_HIGHER: usize = 1;
 const COARSE_WEIGHT: f64 = 1.8;
 
 /// The same at order ≥ 2, with the polynomial prolongation: iterations per step of RK2 + VC2
-/// on the manufactured solution's box at 16 cells, 27 with 1, 19 with 1.4, 20–21 with 1.8.
+/// on the manufactured solution's box at 16 cells, 27 with 1, 19 with 1.4, 20–21 with 1.8
+/// (with two smoothing sweeps; see `SMOOTHING_SWEEPS_HIGHER`).
 const COARSE_WEIGHT_HIGHER: f64 = 1.4;
 
 /// At order 1 the V-cycle is used when the fine level has at least this many rows per axis
