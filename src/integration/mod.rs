@@ -355,7 +355,7 @@ impl Supports {
     }
 
     /// Calls `f(slot, w_Ip, Q_I(x_p))` for every node in the support of particle `p`.
-    #[inline]
+    #[inline(always)]
     fn for_each(&self, p: usize, mut f: impl FnMut(usize, f64, &[f64])) {
         let r = p * self.len..(p + 1) * self.len;
         for (k, (&slot, &w)) in self.slot[r.clone()].iter().zip(&self.weight[r]).enumerate() {
@@ -364,6 +364,84 @@ impl Supports {
                 f(slot as usize, w, q);
             }
         }
+    }
+
+    /// The fit of `ζ` at particle `p`: `μ_p = Σ_I w_Ip ζ_I·Q_I(x_p) / Σ_I w_Ip` per direction
+    /// (zero without weight).
+    fn fit<const D: usize>(&self, p: usize, zeta: &[f64]) -> Vector<D> {
+        // The block sizes of order 2 (2D, 3D) known to the compiler, which unrolls them; the
+        // same sums in the same order.
+        match self.m {
+            3 => self.fit_of::<D, 3>(p, zeta),
+            4 => self.fit_of::<D, 4>(p, zeta),
+            _ => self.fit_of::<D, 0>(p, zeta),
+        }
+    }
+
+    /// [`Supports::fit`] with `M` test polynomials (`0`: `self.m`).
+    #[inline(always)]
+    fn fit_of<const D: usize, const M: usize>(&self, p: usize, zeta: &[f64]) -> Vector<D> {
+        let m = if M > 0 { M } else { self.m };
+        let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
+        self.for_each(p, |slot, w, q| {
+            weight += w;
+            let (z, q) = (&zeta[slot * m * D..][..m * D], &q[..m]);
+            for k in 0..D {
+                mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
+            }
+        });
+        if weight > 0.0 {
+            mu /= weight;
+        }
+        mu
+    }
+
+    /// `−V_p w_Ip Q_I(x_p) μ_p` added to the rows of `out` (`m D` values a slot) of the nodes
+    /// in the support of particle `p` (`v` is `V_p`).
+    ///
+    /// # Safety
+    /// No other thread writes those rows meanwhile.
+    unsafe fn subtract_fit<const D: usize>(
+        &self,
+        p: usize,
+        v: f64,
+        mu: &Vector<D>,
+        out: &SharedSlice<f64>,
+    ) {
+        // SAFETY: the caller's.
+        unsafe {
+            match self.m {
+                3 => self.subtract_fit_of::<D, 3>(p, v, mu, out),
+                4 => self.subtract_fit_of::<D, 4>(p, v, mu, out),
+                _ => self.subtract_fit_of::<D, 0>(p, v, mu, out),
+            }
+        }
+    }
+
+    /// [`Supports::subtract_fit`] with `M` test polynomials (`0`: `self.m`).
+    ///
+    /// # Safety
+    /// As [`Supports::subtract_fit`].
+    #[inline(always)]
+    unsafe fn subtract_fit_of<const D: usize, const M: usize>(
+        &self,
+        p: usize,
+        v: f64,
+        mu: &Vector<D>,
+        out: &SharedSlice<f64>,
+    ) {
+        let m = if M > 0 { M } else { self.m };
+        self.for_each(p, |slot, w, q| {
+            let v = v * w;
+            // SAFETY: the caller's.
+            let o = unsafe { out.range(slot * m * D, m * D) };
+            let q = &q[..m];
+            for k in 0..D {
+                for j in 0..m {
+                    o[k * m + j] -= v * q[j] * mu[k];
+                }
+            }
+        });
     }
 }
 
@@ -892,20 +970,8 @@ impl<const D: usize> VcCorrection<D> {
                 }
                 let mut q = [0.0; MAX_BASIS];
                 let mut weight = 0.0;
-                // `μ_p += w_Jp ζ_J·Q_J(x_p)` at order ≥ 2.
-                let add = |mu: &mut Vector<D>, w: f64, z: &[f64], q: &[f64]| {
-                    for k in 0..D {
-                        mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
-                    }
-                };
                 if matrix_free {
-                    supports.for_each(p, |slot, w, q| {
-                        weight += w;
-                        add(mu, w, &zeta[slot * m * D..], q);
-                    });
-                    if weight > 0.0 {
-                        *mu /= weight;
-                    }
+                    *mu = supports.fit(p, zeta);
                     return;
                 }
                 stencils.for_each_shape(p, |_, s| {
@@ -924,7 +990,9 @@ impl<const D: usize> VcCorrection<D> {
                         return;
                     }
                     q_of(p, s.node, &mut q);
-                    add(mu, w, z, &q);
+                    for k in 0..D {
+                        mu[k] += w * (0..m).map(|j| z[k * m + j] * q[j]).sum::<f64>();
+                    }
                 });
                 if weight > 0.0 {
                     *mu /= weight;
@@ -961,20 +1029,9 @@ impl<const D: usize> VcCorrection<D> {
                         }
                         let v = volumes[p];
                         let (mu, slope) = &fit[p];
-                        // `−V_p w_Ip Q_I(x_p) μ_p` at order ≥ 2.
-                        let sub = |o: &mut [f64], v: f64, q: &[f64]| {
-                            for k in 0..D {
-                                for j in 0..m {
-                                    o[k * m + j] -= v * q[j] * mu[k];
-                                }
-                            }
-                        };
                         if matrix_free {
-                            supports.for_each(p, |slot, w, q| {
-                                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                                let o = unsafe { shared.range(slot * m * D, m * D) };
-                                sub(o, v * w, q);
-                            });
+                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                            unsafe { supports.subtract_fit(p, v, mu, &shared) };
                             continue;
                         }
                         stencils.for_each_shape(p, |_, s| {
@@ -995,7 +1052,11 @@ impl<const D: usize> VcCorrection<D> {
                                 return;
                             }
                             q_of(p, s.node, &mut q);
-                            sub(o, v, &q);
+                            for k in 0..D {
+                                for j in 0..m {
+                                    o[k * m + j] -= v * q[j] * mu[k];
+                                }
+                            }
                         });
                     }
                 });
