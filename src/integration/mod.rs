@@ -1021,7 +1021,6 @@ impl<const D: usize> VcCorrection<D> {
             let fit = &*fit;
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
-                    let mut q = [0.0; MAX_BASIS];
                     for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
                         let p = p as usize;
                         if !counted(p) {
@@ -1034,28 +1033,20 @@ impl<const D: usize> VcCorrection<D> {
                             unsafe { supports.subtract_fit(p, v, mu, &shared) };
                             continue;
                         }
+                        // Order 1 (orders ≥ 2 without the assembled `K` take the supports).
                         stencils.for_each_shape(p, |_, s| {
                             if !s.in_support() {
                                 return;
                             }
                             let v = v * s.value.abs();
                             // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                            let o = unsafe { shared.range(nodes.slot(s.node) * m * D, m * D) };
-                            if m == 1 {
-                                let fitted = match linear_fit {
-                                    true => mu + slope * frame_offset(p, s.node),
-                                    false => *mu,
-                                };
-                                for k in 0..D {
-                                    o[k] -= v * fitted[k];
-                                }
-                                return;
-                            }
-                            q_of(p, s.node, &mut q);
+                            let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };
+                            let fitted = match linear_fit {
+                                true => mu + slope * frame_offset(p, s.node),
+                                false => *mu,
+                            };
                             for k in 0..D {
-                                for j in 0..m {
-                                    o[k * m + j] -= v * q[j] * mu[k];
-                                }
+                                o[k] -= v * fitted[k];
                             }
                         });
                     }
