@@ -379,9 +379,34 @@ enum SeedBody {
     DruckerPrager,
 }
 
+thread_local! {
+    /// The one-thread pool this fuzzing thread's simulations step on. On rayon's global pool, a
+    /// worker waiting inside one target's step takes up the other targets' queued steps (work
+    /// stealing), so a call's time would include theirs and a long but legal call of one target
+    /// could push another's past [`CALL_BUDGET`]. The same bits for any thread count are tested
+    /// elsewhere; here one thread a target keeps the time a call takes its own.
+    static POOL: rayon::ThreadPool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .thread_name(|_| "fuzz-step".into())
+        .build()
+        .expect("a fuzzing thread pool");
+}
+
 /// Runs one case: a new simulation in `dim` dimensions (with a seed body when `seeded`), then
-/// `calls`, checking after each call what the file's documentation promises.
+/// `calls`, checking after each call what the file's documentation promises, on this thread's
+/// [`POOL`].
 fn run_sequence(
+    dim: u32,
+    seeded: bool,
+    seed: SeedBody,
+    calls: &[Call],
+    max_steps: u64,
+) -> Result<(), TestCaseError> {
+    POOL.with(|pool| pool.install(|| run_sequence_here(dim, seeded, seed, calls, max_steps)))
+}
+
+/// [`run_sequence`] on the calling thread.
+fn run_sequence_here(
     dim: u32,
     seeded: bool,
     seed: SeedBody,
