@@ -91,7 +91,7 @@ use crate::error::{Error, Result};
 use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::shape::{Monomials, Stencils};
 use crate::{Matrix, Vector};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVectorViewMut};
 use node_operator::{Multilevel, NodeOperator, OperatorStorage};
 use rayon::prelude::*;
 
@@ -890,9 +890,13 @@ impl<const D: usize> VcCorrection<D> {
                     }
                     for k in 0..D {
                         match &factors[slot] {
+                            // Solved in place (nalgebra's own solve, without its two vectors
+                            // allocated per node and direction).
                             Some(c) => {
-                                let rhs = DVector::from_column_slice(&r[k * m..(k + 1) * m]);
-                                z[k * m..(k + 1) * m].copy_from_slice(c.solve(&rhs).as_slice());
+                                z[k * m..(k + 1) * m].copy_from_slice(&r[k * m..(k + 1) * m]);
+                                let mut z =
+                                    DVectorViewMut::from_slice(&mut z[k * m..(k + 1) * m], m);
+                                c.solve_mut(&mut z);
                             }
                             None => z[k * m] = r[k * m] / moment[slot * m * m],
                         }
