@@ -320,9 +320,9 @@ impl<const D: usize> NodeOperator<D> {
                                 // The block sizes of order 2 (2D, 3D) known to the compiler,
                                 // which unrolls the block; the same sums in the same order.
                                 match m {
-                                    3 => add_batch_block::<3>(n, &uc, uj, r),
-                                    4 => add_batch_block::<4>(n, &uc, uj, r),
-                                    _ => add_batch_block_of(m, n, &uc, uj, r),
+                                    3 => add_batch_block::<3>(m, n, &uc, uj, r),
+                                    4 => add_batch_block::<4>(m, n, &uc, uj, r),
+                                    _ => add_batch_block::<0>(m, n, &uc, uj, r),
                                 }
                             }
                         }
@@ -707,20 +707,11 @@ impl<const D: usize> NodeOperator<D> {
 
 /// One block of an order-≥ 2 batch's flush in [`NodeOperator::assemble`]:
 /// `r[a M + b] += Σ_k uc[a B + k] u_j[k M + b]` over the batch's `n` particles (`B` =
-/// `ASSEMBLY_BATCH`), with `M` known to the compiler.
+/// `ASSEMBLY_BATCH`), with `M` known to the compiler (`0`: the block size `m`), as
+/// `Supports::fit_of` takes it.
 #[inline(always)]
-fn add_batch_block<const M: usize>(n: usize, uc: &[f64], uj: &[f64], r: &mut [f64]) {
-    for a in 0..M {
-        let ua = &uc[a * ASSEMBLY_BATCH..a * ASSEMBLY_BATCH + n];
-        for b in 0..M {
-            let t: f64 = (0..n).map(|k| ua[k] * uj[k * M + b]).sum();
-            r[a * M + b] += t;
-        }
-    }
-}
-
-/// [`add_batch_block`] for any block size `m`.
-fn add_batch_block_of(m: usize, n: usize, uc: &[f64], uj: &[f64], r: &mut [f64]) {
+fn add_batch_block<const M: usize>(m: usize, n: usize, uc: &[f64], uj: &[f64], r: &mut [f64]) {
+    let m = if M > 0 { M } else { m };
     for a in 0..m {
         let ua = &uc[a * ASSEMBLY_BATCH..a * ASSEMBLY_BATCH + n];
         for b in 0..m {
