@@ -38,9 +38,10 @@
 //! preconditioned with the node blocks `A_I`, whose first iterate is the per-node correction;
 //! the iterations grow with the grid's width. `K` is assembled on the nodes once per step, and
 //! on wide grids (order 1: at least 20 nodes wide; order ≥ 2: whenever the hierarchy has a
-//! level below the nodes) preconditioned by an aggregation multigrid V-cycle instead
-//! (`node_operator`): about a dozen iterations whatever the grid with the mean fit, 40–110
-//! with the linear fit (80 to 160 cells), about 20–50 at order 2, where round-off lets
+//! level below the nodes) preconditioned by an aggregation multigrid cycle instead
+//! (`node_operator`; a V-cycle at order 1, a W-cycle at order ≥ 2): about a dozen iterations
+//! whatever the grid with the mean fit, 40–110 with the linear fit (80 to 160 cells), 5–16 at
+//! order 2 with the default stopping rule (more with the exact one), where round-off lets
 //! the residual reach the tolerance only just, and a best residual within
 //! `VC_SOLVE_ATTAINABLE` of it that stops improving is accepted. `K`'s null space is the
 //! corrections that change no gradient (over a whole body, a polynomial of degree < n; at

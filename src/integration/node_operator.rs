@@ -770,10 +770,25 @@ const SMOOTHING_SWEEPS_HIGHER: usize = 1;
 /// with 1, 18–20 with 1.5, 12 with 1.8, 11 with 2; 3D 17–21, 12–14, 12, 12.
 const COARSE_WEIGHT: f64 = 1.8;
 
-/// The same at order ≥ 2, with the polynomial prolongation: iterations per step of RK2 + VC2
-/// on the manufactured solution's box at 16 cells, 27 with 1, 19 with 1.4, 20–21 with 1.8
-/// (with two smoothing sweeps; see `SMOOTHING_SWEEPS_HIGHER`).
-const COARSE_WEIGHT_HIGHER: f64 = 1.4;
+/// The same at order ≥ 2, with the polynomial prolongation and the W-cycle
+/// (`COARSE_VISITS_HIGHER`): iterations per step of RK2 + VC2 on the throughput example's 2D
+/// block (10^4 particles), 20–21 with 1, 17 with 1.2, 15–16 with 1.4, 14 with 1.6, 13 with 1.8,
+/// 16–17 with 2; the step with 1.6 0.95 of that with 1.4. (In a V-cycle, on the manufactured
+/// solution's box at 16 cells: 27 with 1, 19 with 1.4, 20–21 with 1.8.)
+const COARSE_WEIGHT_HIGHER: f64 = 1.6;
+
+/// At order ≥ 2, each level below the fine one is cycled this many times per visit of the level
+/// above (a W-cycle: the second from the residual the first leaves), so that the coarse
+/// correction, weak with pairs of nodes and an unsmoothed prolongation, is solved better than
+/// one V-cycle does; a level's cost is a quarter (2D) or an eighth (3D) of the one above.
+/// RK2 + VC2, one thread, the default rule, iterations per step with one visit against two:
+/// the throughput example's 2D block (10^4 particles) 27–28 against 15–16 (weight 1.4), the
+/// step 0.85 of the V-cycle's; the manufactured solution's box on quarter points, 64 cells,
+/// 26.7 against 14, the run 297 against 249 s, L2 3.324e-5 and 3.321e-5 (exact 3.322e-5); at 32
+/// cells 8 against 6 (jittered 11 against 8), the run 22.1–24.5 against 21.5–22.8 s. Three
+/// visits took 11–12 iterations, no faster. At order 1 two visits took 3 iterations a step
+/// instead of 4 (2D `bspline2` + VC1, 10^5 particles) and the step was no faster (1.008).
+const COARSE_VISITS_HIGHER: usize = 2;
 
 /// At order 1 the V-cycle is used when the fine level has at least this many rows per axis
 /// (`rows^(1/D)`), see [`Multilevel::pays`]. One thread, `throughput --method bspline2 --vc`,
@@ -813,8 +828,9 @@ const COARSEST_ROWS: usize = 400;
 /// The prolongation `P` re-expands an aggregate's polynomial about each of its nodes (at order 1
 /// it is piecewise constant with the mean fit; with the linear fit, whose null space is the linear
 /// fields, the coarse levels carry `1, Z` per aggregate), so that every level holds `K`'s null
-/// space over a whole body. One V-cycle with as many sweeps after as before the coarse
-/// correction is a fixed symmetric positive semi-definite operator, as conjugate gradients need.
+/// space over a whole body. One cycle with as many sweeps after as before the coarse
+/// correction is a fixed symmetric positive semi-definite operator, as conjugate gradients need:
+/// a V-cycle at order 1, a W-cycle at order ≥ 2 (`COARSE_VISITS_HIGHER`).
 /// `K`'s iterations with the node blocks alone grow with the grid's width (about 450 at 160
 /// nodes across with the mean fit); with the V-cycle they do not. The linear fit's `K` weighs a
 /// field's departure from linear, a fourth-order operator (node blocks: 80 iterations at 20
@@ -1452,7 +1468,7 @@ impl<const D: usize> Multilevel<D> {
     /// 161 nodes across in 2D, 82 at 26 in 3D, on the throughput example's blocks), while a
     /// V-cycle costs about six products with `K` and takes about a dozen iterations
     /// (`COARSE_WEIGHT`): from about 20 nodes across it pays (`MULTILEVEL_WIDTH`). At order ≥ 2 the node blocks take about 8 per node across (63 at 13,
-    /// 174 at 21: RK of order 2 on the manufactured solution's box) and the V-cycle about 20,
+    /// 174 at 21: RK of order 2 on the manufactured solution's box) and the W-cycle 5–16,
     /// so it is used whenever the hierarchy has a level below the nodes (on a single level the
     /// coarsest pseudo-inverse, whose norm measures nothing of its dropped directions, stopped
     /// a solve short of the equalities by 1e-11).
@@ -1463,7 +1479,7 @@ impl<const D: usize> Multilevel<D> {
         fine.rows() * fine.m > COARSEST_ROWS
     }
 
-    /// `z = M⁻¹ r`: one V-cycle from zero.
+    /// `z = M⁻¹ r`: one cycle from zero.
     pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
         self.cycle(0, r, z);
         let fine = &self.levels[0];
@@ -1554,6 +1570,25 @@ impl<const D: usize> Multilevel<D> {
         });
         let mut xc = vec![0.0; coarse * pc];
         self.cycle(l + 1, &rc, &mut xc);
+        let visits = match self.levels[0].m {
+            1 => 1,
+            _ => COARSE_VISITS_HIGHER,
+        };
+        if l + 2 < self.levels.len() && visits > 1 {
+            // The coarse residual's own cycles, each from the residual the last left.
+            let mut kxc = vec![0.0; xc.len()];
+            let mut residual = vec![0.0; xc.len()];
+            let mut dx = vec![0.0; xc.len()];
+            for _ in 1..visits {
+                self.levels[l + 1].apply(&xc, &mut kxc);
+                residual
+                    .par_iter_mut()
+                    .zip(rc.par_iter().zip(&kxc))
+                    .for_each(|(e, (r, k))| *e = r - k);
+                self.cycle(l + 1, &residual, &mut dx);
+                xc.par_iter_mut().zip(&dx).for_each(|(x, d)| *x += d);
+            }
+        }
         let reduced = if l == 0 { &self.reduced[..] } else { &[] };
         x.par_chunks_exact_mut(per)
             .zip(parent.par_iter())
