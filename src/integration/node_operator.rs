@@ -12,7 +12,7 @@
 //! (`w_Ip = |Ψ_I(x_p)|`, `W_p = Σ_J w_Jp`), an `m × m` block per pair of nodes. Applied
 //! matrix-free it takes a gather and a scatter over every particle's stencil per
 //! conjugate-gradient iteration; assembled once per step (one pass over the particles' stencil
-//! pairs), an iteration costs a product with a sparse block matrix of `(2w − 1)^D` blocks per
+//! pairs; at order ≥ 2 over half of them, `B_JI = B_IJᵀ` mirrored), an iteration costs a product with a sparse block matrix of `(2w − 1)^D` blocks per
 //! node, `w` nodes per axis of a stencil. [`Multilevel`] preconditions it, so that the
 //! iterations stop growing with the grid's width.
 
@@ -313,7 +313,11 @@ impl<const D: usize> NodeOperator<D> {
                             // SAFETY: as below.
                             let r = unsafe { rows.range(batch.row[i] * block * mm, block * mm) };
                             let base = centre as isize - batch.key[i];
-                            for j in (0..len).filter(|&j| batch.live[j]) {
+                            // `K` is symmetric: a row takes its blocks with the nodes of larger
+                            // keys (its entries from the centre on); the others are mirrored
+                            // from their rows after the pass.
+                            let upper = |&j: &usize| batch.live[j] && batch.key[j] >= batch.key[i];
+                            for j in (0..len).filter(upper) {
                                 let e = (base + batch.key[j]) as usize;
                                 let r = &mut r[e * mm..(e + 1) * mm];
                                 let uj = &batch.u[at(j, 0)..at(j, 0) + n * m];
@@ -460,6 +464,35 @@ impl<const D: usize> NodeOperator<D> {
                     }
                 });
             }
+        }
+        if m > 1 {
+            // Each row's blocks below its centre, the transposes of those its columns' rows
+            // hold above theirs: entry `e > centre` of row `I` (column `J`) is entry
+            // `2 centre − e` of row `J`. Each row reads its own upper entries and writes lower
+            // entries of other rows, each of those written by one row only.
+            let rows = SharedSlice::new(&mut dense);
+            (0..slots).into_par_iter().for_each(|slot| {
+                let node = nodes.active[slot] as isize;
+                // SAFETY: the upper entries of a row are read by that row only, and no row
+                // writes them; a lower entry `(J, 2 centre − e)` is written by row `I` alone.
+                let row = unsafe {
+                    rows.range((slot * block + centre + 1) * mm, (block - centre - 1) * mm)
+                };
+                for (t, b) in row.chunks_exact(mm).enumerate() {
+                    if b.iter().all(|&x| x == 0.0) {
+                        continue;
+                    }
+                    let e = centre + 1 + t;
+                    let col = nodes.slot((node + step[e]) as usize);
+                    // SAFETY: as above.
+                    let mirror = unsafe { rows.range((col * block + 2 * centre - e) * mm, mm) };
+                    for a in 0..m {
+                        for c in 0..m {
+                            mirror[c * m + a] = b[a * m + c];
+                        }
+                    }
+                }
+            });
         }
         // K = diag(A) − B, packed in place (entry `k` of a row from its block entry `e ≥ k`);
         // a reduced node's rows and columns of degree ≥ 1 zero.
