@@ -12,8 +12,9 @@
 //! (`w_Ip = |Ψ_I(x_p)|`, `W_p = Σ_J w_Jp`), an `m × m` block per pair of nodes. Applied
 //! matrix-free it takes a gather and a scatter over every particle's stencil per
 //! conjugate-gradient iteration; assembled once per step (one pass over the particles' stencil
-//! pairs; at order ≥ 2 over half of them, `B_JI = B_IJᵀ` mirrored), an iteration costs a product with a sparse block matrix of `(2w − 1)^D` blocks per
-//! node, `w` nodes per axis of a stencil. [`Multilevel`] preconditions it, so that the
+//! pairs; at order ≥ 2 over half of them, `B_JI = B_IJᵀ` mirrored), an iteration costs a
+//! product with a sparse block matrix of `(2w − 1)^D` blocks per node, `w` nodes per axis of a
+//! stencil. [`Multilevel`] preconditions it, so that the
 //! iterations stop growing with the grid's width.
 
 use super::lattice_rows::LatticeRows;
@@ -815,11 +816,11 @@ const COARSE_WEIGHT_HIGHER: f64 = 1.6;
 /// correction, weak with pairs of nodes and an unsmoothed prolongation, is solved better than
 /// one V-cycle does; a level's cost is a quarter (2D) or an eighth (3D) of the one above.
 /// RK2 + VC2, one thread, the default rule, iterations per step with one visit against two:
-/// the throughput example's 2D block (10^4 particles) 27–28 against 15–16 (weight 1.4), the
-/// step 0.85 of the V-cycle's; the manufactured solution's box on quarter points, 64 cells,
-/// 26.7 against 14, the run 297 against 249 s, L2 3.324e-5 and 3.321e-5 (exact 3.322e-5); at 32
-/// cells 8 against 6 (jittered 11 against 8), the run 22.1–24.5 against 21.5–22.8 s. Three
-/// visits took 11–12 iterations, no faster. At order 1 two visits took 3 iterations a step
+/// the throughput example's 2D block (10^4 particles) 27–28 against 14, the step 0.861 of the
+/// V-cycle's (BENCHMARKS.md); the manufactured solution's box on quarter points, 64 cells
+/// (weight 1.4), 26.7 against 14, the run 297 against 249 s, L2 3.324e-5 and 3.321e-5 (exact
+/// 3.322e-5); at 32 cells 8 against 5 (jittered 11 against 7), the run 0.994 of the V-cycle's.
+/// Three visits took 11–12 iterations, no faster. At order 1 two visits took 3 iterations a step
 /// instead of 4 (2D `bspline2` + VC1, 10^5 particles) and the step was no faster (1.008).
 const COARSE_VISITS_HIGHER: usize = 2;
 
