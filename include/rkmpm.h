@@ -43,6 +43,12 @@
 #define RKMPM_DEFAULT_VC_SOLVE_TOLERANCE 1e-4
 
 /**
+ * Every how many steps VC finds the surface of the particles anew in a new simulation
+ * (`rkmpm_sim_set_vc_surface_refresh`).
+ */
+#define RKMPM_DEFAULT_VC_SURFACE_REFRESH 4
+
+/**
  * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
  */
 #define RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS 2000
@@ -882,6 +888,28 @@ enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
 enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
                                         double tolerance,
                                         uint64_t max_iterations);
+
+/**
+ * Sets every how many steps VC finds the surface of the particles anew (VC without given
+ * boundary points, without contact): every `steps` >= 1 steps, the grid carrying the surface
+ * between like given boundary points; 1 finds it at every step. Default
+ * `RKMPM_DEFAULT_VC_SURFACE_REFRESH` (4: a quarter of the cost of finding it at every step,
+ * errors within a few per cent either way, docs/convergence/FINDINGS.md). May change between
+ * steps; part of a checkpoint, with the carried surface. A refused value changes nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_vc_surface_refresh(struct RkmpmSim *sim, uint32_t steps);
+
+/**
+ * Writes every how many steps VC finds the surface anew (`rkmpm_sim_set_vc_surface_refresh`)
+ * to `*out_steps`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_steps` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_vc_surface_refresh(const struct RkmpmSim *sim, uint32_t *out_steps);
 
 /**
  * Writes the stopping rule of VC's solve in force (`rkmpm_sim_set_vc_solve`: the one given, or the

@@ -89,7 +89,7 @@ pub use integration::{BoundaryPoints, VcSolve};
 pub use material::Material;
 pub use particles::{Field, Particles};
 pub use shape::{Shape, UniformRng};
-pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer};
+pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer, DEFAULT_VC_SURFACE_REFRESH};
 pub use walls::{Side, Wall};
 
 /// A column vector of the simulation's dimension.

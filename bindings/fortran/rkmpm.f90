@@ -48,6 +48,9 @@ module rkmpm
    ! across (sim%vc_solve reports the rule in force).
    real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-4_c_double
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
+   ! Every how many steps VC finds the surface of the particles anew in a new simulation
+   ! (sim%set_vc_surface_refresh changes it).
+   integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4
 
    ! enum RkmpmStatus (a C enum: int-sized)
    integer(c_int), parameter, public :: RKMPM_OK = 0
@@ -230,6 +233,8 @@ module rkmpm
       procedure :: max_steps_per_advance => sim_max_steps_per_advance
       procedure :: set_vc_solve => sim_set_vc_solve
       procedure :: vc_solve => sim_vc_solve
+      procedure :: set_vc_surface_refresh => sim_set_vc_surface_refresh
+      procedure :: vc_surface_refresh => sim_vc_surface_refresh
       procedure :: time => sim_time
       procedure :: energies => sim_energies
       procedure :: momenta => sim_momenta
@@ -572,6 +577,23 @@ module rkmpm
          real(c_double), intent(out) :: out_tolerance
          integer(c_int64_t), intent(out) :: out_max_iterations
       end function rkmpm_sim_vc_solve
+
+      ! enum RkmpmStatus rkmpm_sim_set_vc_surface_refresh(struct RkmpmSim *sim, uint32_t steps);
+      integer(c_int) function rkmpm_sim_set_vc_surface_refresh(sim, steps) &
+            bind(C, name="rkmpm_sim_set_vc_surface_refresh")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: steps
+      end function rkmpm_sim_set_vc_surface_refresh
+
+      ! enum RkmpmStatus rkmpm_sim_vc_surface_refresh(const struct RkmpmSim *sim,
+      !                                               uint32_t *out_steps);
+      integer(c_int) function rkmpm_sim_vc_surface_refresh(sim, out_steps) &
+            bind(C, name="rkmpm_sim_vc_surface_refresh")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), intent(out) :: out_steps
+      end function rkmpm_sim_vc_surface_refresh
 
       ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
       integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
@@ -1357,6 +1379,35 @@ contains
       call report(rkmpm_sim_vc_solve(self%h, tolerance, max_iterations), 'vc_solve', stat, text)
       if (present(errmsg)) errmsg = text
    end subroutine sim_vc_solve
+
+   !> Every how many steps VC finds the surface of the particles anew (VC without given
+   !> boundary points, without contact; default RKMPM_DEFAULT_VC_SURFACE_REFRESH, 4): the grid
+   !> carries the surface between like given boundary points; 1 finds it at every step.
+   !> steps < 1 is refused. Part of a checkpoint.
+   subroutine sim_set_vc_surface_refresh(self, steps, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: steps
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      ! C takes an unsigned count: a negative one is passed as 0, which C refuses.
+      call report(rkmpm_sim_set_vc_surface_refresh(self%h, max(steps, 0_c_int32_t)), &
+         'set_vc_surface_refresh', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_vc_surface_refresh
+
+   !> Every how many steps VC finds the surface anew (sim%set_vc_surface_refresh).
+   integer(c_int32_t) function sim_vc_surface_refresh(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: n
+      n = 0
+      call report(rkmpm_sim_vc_surface_refresh(self%h, n), 'vc_surface_refresh', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_vc_surface_refresh = n
+   end function sim_vc_surface_refresh
 
    !> The energies of the particles now.
    type(rkmpm_energies) function sim_energies(self, stat, errmsg)

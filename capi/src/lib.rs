@@ -39,6 +39,10 @@ const _: () =
 /// new simulation's tolerance is 1e-4 on grids of up to 32 cells across and `1e-4 (32 / N)^3`
 /// on a grid `N` cells across (`rkmpm_sim_vc_solve` reports it; `rkmpm_sim_set_vc_solve`).
 pub const RKMPM_DEFAULT_VC_SOLVE_TOLERANCE: f64 = 1e-4;
+/// Every how many steps VC finds the surface of the particles anew in a new simulation
+/// (`rkmpm_sim_set_vc_surface_refresh`).
+pub const RKMPM_DEFAULT_VC_SURFACE_REFRESH: u32 = 4;
+const _: () = assert!(RKMPM_DEFAULT_VC_SURFACE_REFRESH == rkmpm::DEFAULT_VC_SURFACE_REFRESH);
 /// The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
 pub const RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS: u64 = 2000;
 const _: () = assert!(
@@ -1265,6 +1269,47 @@ pub unsafe extern "C" fn rkmpm_sim_set_vc_solve(
         };
         with_sim!(&mut s.sim, m => m.set_vc_solve(solve))?;
         Ok(())
+    })
+}
+
+/// Sets every how many steps VC finds the surface of the particles anew (VC without given
+/// boundary points, without contact): every `steps` >= 1 steps, the grid carrying the surface
+/// between like given boundary points; 1 finds it at every step. Default
+/// `RKMPM_DEFAULT_VC_SURFACE_REFRESH` (4: a quarter of the cost of finding it at every step,
+/// errors within a few per cent either way, docs/convergence/FINDINGS.md). May change between
+/// steps; part of a checkpoint, with the carried surface. A refused value changes nothing.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_vc_surface_refresh(
+    sim: *mut RkmpmSim,
+    steps: u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_set_vc_surface_refresh", || {
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        with_sim!(&mut s.sim, m => m.set_vc_surface_refresh(steps))?;
+        Ok(())
+    })
+}
+
+/// Writes every how many steps VC finds the surface anew (`rkmpm_sim_set_vc_surface_refresh`)
+/// to `*out_steps`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_steps` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_vc_surface_refresh(
+    sim: *const RkmpmSim,
+    out_steps: *mut u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_vc_surface_refresh", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let steps = with_sim!(&s.sim, m => m.vc_surface_refresh());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_steps", out_steps, steps) }
     })
 }
 

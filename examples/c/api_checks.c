@@ -1000,6 +1000,37 @@ static void lifetime_rows(void) {
     EXPECT(tolerance == 7.0 && iterations == 77, "wrote one output after a failure");
     drop(&f);
   }
+  ROW("set_vc_surface_refresh.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_vc_surface_refresh(NULL, 2));
+  }
+  ROW("set_vc_surface_refresh.zero", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_vc_surface_refresh(f.sim, 3));
+    CALL(f.sim, rkmpm_sim_set_vc_surface_refresh(f.sim, 0));
+    uint32_t steps = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_surface_refresh(f.sim, &steps));
+    EXPECT(steps == 3, "the interval is %u", (unsigned)steps);
+    drop(&f);
+  }
+  ROW("vc_surface_refresh.null_sim", RKMPM_ERR_NULL_POINTER) {
+    uint32_t steps = 77;
+    CALL(NULL, rkmpm_sim_vc_surface_refresh(NULL, &steps));
+    EXPECT(steps == 77, "wrote the output after a failure");
+  }
+  ROW("vc_surface_refresh.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_vc_surface_refresh(f.sim, NULL));
+    uint32_t steps = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_surface_refresh(f.sim, &steps));
+    EXPECT(steps == RKMPM_DEFAULT_VC_SURFACE_REFRESH, "the default interval is %u",
+           (unsigned)steps);
+    drop(&f);
+  }
+  ROW("vc_surface_refresh.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_vc_surface_refresh(f.sim, misaligned(raw)));
+    drop(&f);
+  }
 }
 
 static void option_rows(void) {

@@ -181,6 +181,13 @@ program error_handling
    call expect(st, RKMPM_OK, msg, 'VC solve rule')
    call expect_true(tolerance == RKMPM_DEFAULT_VC_SOLVE_TOLERANCE .and. &
                     iterations == RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS, 'default VC solve rule')
+   call expect_true(sim%vc_surface_refresh() == RKMPM_DEFAULT_VC_SURFACE_REFRESH, &
+                    'default found-surface refresh')
+   call sim%set_vc_surface_refresh(-2_c_int32_t, stat=st, errmsg=msg)
+   call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'found-surface refresh of -2 steps')
+   call sim%set_vc_surface_refresh(2_c_int32_t, stat=st, errmsg=msg)
+   call expect(st, RKMPM_OK, msg, 'found-surface refresh of 2 steps')
+   call expect_true(sim%vc_surface_refresh() == 2, 'found-surface refresh kept')
    call sim%set_vc_solve(2.0_c_double, 10_c_int64_t, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'VC solve tolerance 2')
    call sim%set_vc_solve(1.0e-8_c_double, -1_c_int64_t, stat=st, errmsg=msg)

@@ -100,6 +100,10 @@ pub struct OptionsSpec {
     /// VC only: the solve's iteration bound (default the engine's, 2000).
     #[serde(default)]
     pub vc_max_iterations: Option<usize>,
+    /// VC only: every how many steps the surface of the particles is found anew (default the
+    /// engine's, 4; 1 at every step).
+    #[serde(default)]
+    pub vc_surface_refresh: Option<u32>,
     #[serde(default)]
     pub transfer: TransferKind,
     /// PIC/FLIP only: the FLIP fraction of the blend (default 0).
@@ -170,6 +174,7 @@ impl OptionsSpec {
                 ("vc_order", self.vc_order.is_some()),
                 ("vc_tolerance", self.vc_tolerance.is_some()),
                 ("vc_max_iterations", self.vc_max_iterations.is_some()),
+                ("vc_surface_refresh", self.vc_surface_refresh.is_some()),
             ] {
                 if given {
                     return unused(key, "it sets VC integration, and integration is not \"vc\"");
@@ -477,6 +482,9 @@ impl Scene {
             .map_err(context(table))?;
         if let Some(solve) = o.vc_solve(sim.vc_solve()) {
             sim.set_vc_solve(solve).map_err(context(table))?;
+        }
+        if let Some(steps) = o.vc_surface_refresh {
+            sim.set_vc_surface_refresh(steps).map_err(context(table))?;
         }
         sim.set_transfer(o.transfer()).map_err(context(table))?;
         sim.set_scheme(o.scheme).map_err(context(table))?;
@@ -1055,6 +1063,15 @@ mod tests {
         assert!(e.contains("options: the VC solve's tolerance"), "{e}");
         let e = rule(&with("vc_max_iterations = 0")).unwrap_err();
         assert!(e.contains("at least one iteration"), "{e}");
+        let refresh = |text: &str| match Scene::from_toml(text, "x").and_then(|s| s.build()) {
+            Ok(SceneSim::D2(sim)) => Ok(sim.vc_surface_refresh()),
+            Ok(SceneSim::D3(_)) => unreachable!("disks is 2D"),
+            Err(e) => Err(e.message),
+        };
+        assert_eq!(refresh(disks), Ok(rkmpm::DEFAULT_VC_SURFACE_REFRESH));
+        assert_eq!(refresh(&with("vc_surface_refresh = 1")), Ok(1));
+        let e = refresh(&with("vc_surface_refresh = 0")).unwrap_err();
+        assert!(e.contains("at least one step"), "{e}");
         let bar = BUNDLED[1].1.replacen(
             "transfer = \"apic\"\n",
             "transfer = \"apic\"\nvc_tolerance = 1e-6\n",

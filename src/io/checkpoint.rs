@@ -40,7 +40,52 @@ const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// load with `VcSolve::EXACT`. Version 5 writes the automatic rule (`VcSolve::automatic`, no
 /// rule given) as a tolerance and an iteration bound of zero; version 4 files load with the
 /// rule they hold.
-pub const CHECKPOINT_VERSION: u32 = 5;
+/// Version 6 adds the found surface's refresh interval (`Sim::set_vc_surface_refresh`), its
+/// age and the surface as carried, for an exact restart; older files load with the default
+/// interval and find the surface anew at their first step.
+pub const CHECKPOINT_VERSION: u32 = 6;
+
+/// Writes boundary points: positions, reference and current area normals, deformation
+/// gradients and tractions.
+fn write_points<const D: usize>(w: &mut Writer, b: &BoundaryPoints<D>) {
+    w.vectors(&b.position);
+    w.vectors(&b.reference_area_normal);
+    w.vectors(&b.area_normal);
+    w.matrices(&b.deformation_gradient);
+    w.vectors(&b.traction);
+}
+
+/// Reads what [`write_points`] wrote: arrays of one length (tractions may be empty), points
+/// inside the grid.
+fn read_points<const D: usize>(
+    r: &mut Reader,
+    grid: &crate::grid::Grid<D>,
+    what: &str,
+) -> Result<BoundaryPoints<D>> {
+    let b = BoundaryPoints {
+        position: r.vectors()?,
+        reference_area_normal: r.vectors()?,
+        area_normal: r.vectors()?,
+        deformation_gradient: r.matrices()?,
+        traction: r.vectors()?,
+    };
+    let nb = b.position.len();
+    if [
+        b.reference_area_normal.len(),
+        b.area_normal.len(),
+        b.deformation_gradient.len(),
+    ]
+    .iter()
+    .any(|&k| k != nb)
+        || !(b.traction.is_empty() || b.traction.len() == nb)
+    {
+        return Err(corrupt(format!("the {what} arrays differ in length")));
+    }
+    if let Some(k) = b.position.iter().position(|x| !grid.contains(x)) {
+        return Err(corrupt(format!("{what} {k} lies outside the grid")));
+    }
+    Ok(b)
+}
 
 fn corrupt(what: impl Into<String>) -> Error {
     Error::new(ErrorKind::CorruptFile, what)
@@ -468,12 +513,7 @@ impl<const D: usize> Sim<D> {
             .iter()
             .for_each(|m| write_material(&mut w, m));
         write_particles(&mut w, &self.particles, version);
-        let b = &self.boundary;
-        w.vectors(&b.position);
-        w.vectors(&b.reference_area_normal);
-        w.vectors(&b.area_normal);
-        w.matrices(&b.deformation_gradient);
-        w.vectors(&b.traction);
+        write_points(&mut w, &self.boundary);
         w.f64(self.time);
         w.u64(self.steps);
         if version >= 3 {
@@ -497,6 +537,11 @@ impl<const D: usize> Sim<D> {
         } else if version >= 4 {
             w.f64(self.vc_solve().tolerance);
             w.u64(self.vc_solve().max_iterations as u64);
+        }
+        if version >= 6 {
+            w.u32(self.vc_surface_refresh);
+            w.u32(self.surface_age);
+            write_points(&mut w, &self.surface);
         }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
@@ -585,34 +630,7 @@ impl<const D: usize> Sim<D> {
             )));
         }
         sim.particles = ps;
-        sim.boundary = BoundaryPoints {
-            position: r.vectors()?,
-            reference_area_normal: r.vectors()?,
-            area_normal: r.vectors()?,
-            deformation_gradient: r.matrices()?,
-            traction: r.vectors()?,
-        };
-        let b = &sim.boundary;
-        let nb = b.position.len();
-        if [
-            b.reference_area_normal.len(),
-            b.area_normal.len(),
-            b.deformation_gradient.len(),
-        ]
-        .iter()
-        .any(|&k| k != nb)
-            || !(b.traction.is_empty() || b.traction.len() == nb)
-        {
-            return Err(corrupt("the boundary-point arrays differ in length"));
-        }
-        if let Some(b) = sim
-            .boundary
-            .position
-            .iter()
-            .position(|x| !sim.grid.contains(x))
-        {
-            return Err(corrupt(format!("boundary point {b} lies outside the grid")));
-        }
+        sim.boundary = read_points(&mut r, &sim.grid, "boundary point")?;
         sim.time = r.f64()?;
         sim.steps = r.u64()?;
         if version >= 3 {
@@ -644,6 +662,12 @@ impl<const D: usize> Sim<D> {
             sim.set_vc_solve_automatic();
         } else {
             sim.set_vc_solve(solve)?;
+        }
+        if version >= 6 {
+            sim.set_vc_surface_refresh(r.u32()?)
+                .map_err(|_| corrupt("a found-surface refresh of zero steps"))?;
+            sim.surface_age = r.u32()?;
+            sim.surface = read_points(&mut r, &sim.grid, "found surface point")?;
         }
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
@@ -750,7 +774,7 @@ mod tests {
         assert_eq!(old.particles, sim.particles);
         // A flag other than 0 or 1 is refused.
         let mut bytes = sim.checkpoint_bytes();
-        let flag = bytes.len() - 4 - 16 - 6 * 8 - 4;
+        let flag = bytes.len() - 4 - EMPTY_SURFACE_TAIL - 16 - 6 * 8 - 4;
         bytes[flag] = 2;
         refused_as_corrupt(&mut bytes, "energy accounting flag 2");
     }
@@ -778,9 +802,49 @@ mod tests {
         assert_eq!(old.vc_solve(), crate::VcSolve::EXACT);
         // A tolerance the engine refuses is a damaged file.
         let mut bytes = sim.checkpoint_bytes();
-        let tolerance = bytes.len() - 4 - 16;
+        let tolerance = bytes.len() - 4 - EMPTY_SURFACE_TAIL - 16;
         bytes[tolerance..tolerance + 8].copy_from_slice(&2.0f64.to_le_bytes());
         refused_as_corrupt(&mut bytes, "tolerance");
+    }
+
+    /// Bytes of format 6's tail without a found surface: the refresh interval and the age
+    /// (4 bytes each) and the five empty arrays' lengths (8 each).
+    const EMPTY_SURFACE_TAIL: usize = 4 + 4 + 5 * 8;
+
+    /// Format 6 keeps the found surface's refresh interval and the surface as carried: a run
+    /// saved between refreshes goes on as the uninterrupted run, bit for bit. A format-5 file
+    /// loads with the default interval and finds the surface at its first step; an interval of
+    /// zero is a damaged file.
+    #[test]
+    fn the_carried_surface_is_kept_from_format_6() {
+        let mut sim = block();
+        sim.set_integration(crate::Integration::Vc { order: 1 })
+            .unwrap();
+        sim.set_vc_surface_refresh(3).unwrap();
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..2 {
+            sim.step(dt).unwrap();
+        }
+        assert_eq!(sim.surface_age, 2);
+        let mut copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert_eq!(copy.vc_surface_refresh(), 3);
+        assert_eq!(copy.vc_surface(), sim.vc_surface());
+        for _ in 0..3 {
+            sim.step(dt).unwrap();
+            copy.step(dt).unwrap();
+        }
+        assert_eq!(copy.particles, sim.particles);
+        assert_eq!(copy.vc_surface(), sim.vc_surface());
+        let old = Sim::<2>::from_checkpoint_bytes(&sim.encode(5)).unwrap();
+        assert_eq!(old.vc_surface_refresh(), crate::DEFAULT_VC_SURFACE_REFRESH);
+        assert!(old.vc_surface().is_empty());
+        assert_eq!(old.particles, sim.particles);
+        // The interval sits after the solve's rule; the surface's arrays follow it.
+        let mut bytes = sim.checkpoint_bytes();
+        let surface_bytes = sim.surface.len() * (2 + 2 + 2 + 4) * 8;
+        let interval = bytes.len() - 4 - EMPTY_SURFACE_TAIL - surface_bytes;
+        bytes[interval..interval + 4].copy_from_slice(&0u32.to_le_bytes());
+        refused_as_corrupt(&mut bytes, "refresh of zero steps");
     }
 
     /// A checkpoint edited in its payload, its checksum made right again, is refused as a

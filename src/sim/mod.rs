@@ -5,6 +5,10 @@ mod timestep;
 
 pub use timestep::{Progress, DEFAULT_MAX_STEPS_PER_ADVANCE};
 
+/// Every how many steps VC finds the surface of the particles anew by default
+/// ([`Sim::set_vc_surface_refresh`]).
+pub const DEFAULT_VC_SURFACE_REFRESH: u32 = 4;
+
 use crate::energy::EnergyLedger;
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
@@ -139,9 +143,13 @@ pub struct Sim<const D: usize> {
     pub(crate) particles: Particles<D>,
     pub(crate) body_force: Option<Box<dyn BodyForce<D>>>,
     pub(crate) boundary: BoundaryPoints<D>,
-    /// The surface VC found from the particles for the last step (when no boundary points are
-    /// given); derived from the particles at every step, so neither checkpointed nor restored.
+    /// The surface VC found from the particles (when no boundary points are given): as found
+    /// for the last step, or carried by the grid since ([`Sim::set_vc_surface_refresh`]).
     pub(crate) surface: BoundaryPoints<D>,
+    /// Steps the surface has been carried since it was found (`u32::MAX`: to be found anew).
+    pub(crate) surface_age: u32,
+    /// The found surface is found anew at least every this many steps.
+    pub(crate) vc_surface_refresh: u32,
     pub(crate) vc: Option<VcCorrection<D>>,
     /// Whether VC of order 1 subtracts the particles' linear fit ([`Sim::set_vc_linear_fit`]).
     vc_linear_fit: bool,
@@ -180,6 +188,8 @@ impl<const D: usize> Sim<D> {
             body_force: None,
             boundary: BoundaryPoints::default(),
             surface: BoundaryPoints::default(),
+            surface_age: u32::MAX,
+            vc_surface_refresh: DEFAULT_VC_SURFACE_REFRESH,
             vc: None,
             vc_linear_fit: false,
             vc_solve: None,
@@ -479,14 +489,38 @@ impl<const D: usize> Sim<D> {
         self.boundary.add(positions, area_normals, tractions)
     }
 
+    /// How often VC finds the surface of the particles anew (when no boundary points are given,
+    /// without contact): every `steps` steps, the grid carrying it between like given boundary
+    /// points (positions with the grid velocity, `n a` by Nanson's formula); 1 finds it at every
+    /// step. The default, [`DEFAULT_VC_SURFACE_REFRESH`] steps, takes a quarter of finding it
+    /// at every step, with the errors of the convergence study and the collapses within a few
+    /// per cent either way (docs/convergence/FINDINGS.md, "The found surface, carried"). A
+    /// body that breaks apart gets its new faces when the surface is next found. Kept by
+    /// checkpoints with the carried surface; any time. Refuses 0.
+    pub fn set_vc_surface_refresh(&mut self, steps: u32) -> Result<()> {
+        if steps == 0 {
+            return Err(Error::invalid(
+                "the found surface's refresh interval must be at least one step",
+            ));
+        }
+        self.vc_surface_refresh = steps;
+        Ok(())
+    }
+
+    /// Every how many steps VC finds the surface of the particles anew
+    /// ([`Sim::set_vc_surface_refresh`]).
+    pub fn vc_surface_refresh(&self) -> u32 {
+        self.vc_surface_refresh
+    }
+
     /// The boundary points given with [`Sim::add_boundary_points`], as they have moved.
     pub fn boundary_points(&self) -> &BoundaryPoints<D> {
         &self.boundary
     }
 
-    /// The surface VC integrated over in the last step: the given boundary points, or without
-    /// any the surface found from the particles at the start of that step (empty before the
-    /// first step and without VC).
+    /// The surface VC integrates over: the given boundary points, or without any the surface
+    /// found from the particles at the start of the last step, or carried since for the next
+    /// ([`Sim::set_vc_surface_refresh`]; empty before the first step and without VC).
     pub fn vc_surface(&self) -> &BoundaryPoints<D> {
         if self.boundary.is_empty() {
             &self.surface
@@ -683,6 +717,8 @@ impl<const D: usize> Sim<D> {
         if apic {
             ps.affine.resize(ps.position.len(), Matrix::<D>::zeros());
         }
+        // New particles: the next step finds the surface anew.
+        self.surface_age = u32::MAX;
         Ok(())
     }
 

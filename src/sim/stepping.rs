@@ -4,7 +4,7 @@
 use super::Sim;
 use crate::error::{check_positive, Error, ErrorKind, Result};
 use crate::options::{Scheme, Transfer};
-use crate::step::{lap, Step, StepLabel};
+use crate::step::{lap, Step, StepLabel, SurfacePlan};
 use crate::Vector;
 
 impl<const D: usize> Sim<D> {
@@ -54,14 +54,34 @@ impl<const D: usize> Sim<D> {
         // The parallel passes of the step then run on the pool's threads without the calling
         // thread handing each one over and sleeping until it ends (two thread switches per
         // pass, about a dozen passes per step), which shows most on small problems.
-        rayon::scope(|_| self.phases_of_step().run(dt))?;
+        let plan = self.surface_plan();
+        rayon::scope(|_| self.phases_of_step(plan).run(dt))?;
         self.time += dt;
         self.steps += 1;
         Ok(())
     }
 
+    /// How the next step takes the surface VC finds from the particles (only VC without given
+    /// boundary points and without contact carries one): found anew when there is none or it
+    /// has been carried `vc_surface_refresh` steps; carried on when it will be used again.
+    pub(crate) fn surface_plan(&self) -> SurfacePlan {
+        let own = self.vc.is_some() && self.boundary.is_empty() && self.options.contact.is_none();
+        if !own {
+            return SurfacePlan {
+                find: true,
+                carry: false,
+            };
+        }
+        let find = self.surface.is_empty() || self.surface_age >= self.vc_surface_refresh;
+        let age = if find { 0 } else { self.surface_age };
+        SurfacePlan {
+            find,
+            carry: age + 1 < self.vc_surface_refresh,
+        }
+    }
+
     /// The step's view of the simulation: what it reads and what it changes.
-    fn phases_of_step(&mut self) -> Step<'_, D> {
+    fn phases_of_step(&mut self, surface_plan: SurfacePlan) -> Step<'_, D> {
         Step {
             grid: &self.grid,
             shape: self.shape.as_ref(),
@@ -76,6 +96,8 @@ impl<const D: usize> Sim<D> {
             particles: &mut self.particles,
             boundary: &mut self.boundary,
             surface: &mut self.surface,
+            surface_plan,
+            surface_age: &mut self.surface_age,
             vc: &mut self.vc,
             work: &mut self.work,
             energy: &mut self.energy,

@@ -30,6 +30,10 @@ pub(super) fn check_new_state<const D: usize, S>(
             return Err(error);
         }
     }
+    if inputs.surface_plan.carry && inputs.boundary.is_empty() {
+        settle_carried_surface(inputs, &mut work.boundary_updates);
+        return Ok(());
+    }
     match settle_boundary_points(inputs, &mut work.boundary_updates) {
         Some(error) => Err(error),
         None => Ok(()),
@@ -63,6 +67,28 @@ fn first_rejected_particle<const D: usize, S>(
 
 /// Keeps the boundary points' new positions inside the walls; the error for the first one
 /// outside the grid, if any.
+/// A carried found surface is the engine's own quadrature, not the caller's points: its moved
+/// points are kept inside the grid's box (the surface found from the particles ends at the box
+/// too), and where one cannot be carried (a non-finite value, an inverted `F_b`) none is: the
+/// updates are dropped and the next step finds the surface anew, where given boundary points
+/// would refuse the step.
+fn settle_carried_surface<const D: usize, S>(
+    inputs: &StepInputs<'_, D, S>,
+    updates: &mut Vec<super::BoundaryUpdate<D>>,
+) {
+    let domain = inputs.grid.domain();
+    for u in updates.iter_mut() {
+        for a in 0..D {
+            if u.position[a].is_finite() {
+                u.position[a] = u.position[a].max(domain.lower[a]).min(domain.upper[a]);
+            }
+        }
+    }
+    if super::surface::settle_boundary_points(inputs.walls, &domain, updates).is_some() {
+        updates.clear();
+    }
+}
+
 fn settle_boundary_points<const D: usize, S>(
     inputs: &StepInputs<'_, D, S>,
     updates: &mut [super::BoundaryUpdate<D>],

@@ -168,7 +168,30 @@ pub(crate) struct StepInputs<'a, const D: usize, S> {
     pub fast_paths: FastPaths,
     pub label: StepLabel,
     pub plan: TransferPlan,
+    pub surface_plan: SurfacePlan,
     pub dt: f64,
+}
+
+/// The found surface's age after a step taken with `plan` (`carried`: its points moved): 1
+/// after the step that found it and carried it, one more after each step that carried it,
+/// `u32::MAX` (found anew by the next step) when not carried.
+pub(crate) fn surface_age_after(age: u32, plan: SurfacePlan, carried: bool) -> u32 {
+    match (carried, plan.find) {
+        (true, true) => 1,
+        (true, false) => age.saturating_add(1),
+        (false, _) => u32::MAX,
+    }
+}
+
+/// How a step takes the surface VC finds from the particles (no boundary points given):
+/// found anew from the particles at its start, or the last one as the grid carried it; and
+/// whether the step carries it on to the next (METHOD.md section 3: the found surface).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct SurfacePlan {
+    /// Find the surface from the particles at the start of the step.
+    pub find: bool,
+    /// Move the surface with the grid like given boundary points, for the next step.
+    pub carry: bool,
 }
 
 /// One step of a simulation: what it reads of the simulation and what it changes
@@ -187,6 +210,11 @@ pub(crate) struct Step<'a, const D: usize> {
     pub boundary: &'a mut BoundaryPoints<D>,
     /// The surface VC finds from the particles when no boundary points are given.
     pub surface: &'a mut BoundaryPoints<D>,
+    /// How the found surface is taken this step: found anew or carried ([`SurfacePlan`]).
+    pub surface_plan: SurfacePlan,
+    /// Steps the found surface has been carried since it was found (`u32::MAX`: to be found
+    /// anew); the commit advances it.
+    pub surface_age: &'a mut u32,
     pub vc: &'a mut Option<VcCorrection<D>>,
     pub work: &'a mut Workspace<D>,
     /// The energy ledger, which the commit adds the step's work to when it is on.
@@ -197,12 +225,12 @@ impl<const D: usize> Step<'_, D> {
     /// Runs the phases and, when every check passed, commits the new state; a rejected step
     /// changes nothing of the simulation but its scratch space.
     pub(crate) fn run(mut self, dt: f64) -> Result<()> {
-        // The surface VC finds from the particles this step replaces the last one, which a
-        // rejected step restores.
-        let last_surface = std::mem::take(self.surface);
+        // A surface VC finds from the particles this step replaces the last one, which a
+        // rejected step restores (a carried one changes only in the commit).
+        let last_surface = self.surface_plan.find.then(|| std::mem::take(self.surface));
         let result = self.compute_step(dt);
-        if result.is_err() {
-            *self.surface = last_surface;
+        if let (Err(_), Some(last)) = (&result, last_surface) {
+            *self.surface = last;
         }
         let mut clock = std::time::Instant::now();
         self.work.active_nodes = self.work.nodes.active.len();
@@ -387,6 +415,7 @@ impl<const D: usize> Step<'_, D> {
             fast_paths: self.fast_paths,
             label: self.label,
             plan,
+            surface_plan: self.surface_plan,
             dt,
         };
         let result = run_phases(&inputs, &mut *self.vc, &mut *self.surface, work);
@@ -428,7 +457,16 @@ impl<const D: usize> Step<'_, D> {
         if self.work.reorder == Reorder::AtCommit {
             ps.permute(order, &mut self.work.spare);
         }
-        let b = &mut self.boundary;
+        // The found surface's age: the steps it has been carried since it was found; one not
+        // carried (or whose points could not be carried) is found anew by the next step.
+        let plan = self.surface_plan;
+        let carried = plan.carry && self.work.boundary_updates.len() == self.surface.len();
+        *self.surface_age = surface_age_after(*self.surface_age, plan, carried);
+        // The moved points: the given boundary points', or the carried surface's.
+        let b = match plan.carry {
+            true => &mut *self.surface,
+            false => &mut *self.boundary,
+        };
         for (k, u) in self.work.boundary_updates.iter().enumerate() {
             b.position[k] = u.position;
             b.deformation_gradient[k] = u.deformation_gradient;
@@ -489,7 +527,8 @@ fn run_phases<const D: usize, S: StencilView<D>>(
     let vc = vc.as_ref();
     let (mass_floor, body_surfaces) = particle_to_grid_and_update(inputs, vc, boundary, work)?;
     // 5–6. Grid to particle and the constitutive update; boundary points move with the grid.
-    let moving = (vc.is_some() || boundary.has_tractions()) && !found;
+    let moving =
+        (vc.is_some() || boundary.has_tractions()) && (!found || inputs.surface_plan.carry);
     let moving = moving.then_some(boundary);
     let all_admissible = grid_to_particle_and_update(inputs, moving, scattered, mass_floor, work);
     // The checks: every particle, every boundary point.

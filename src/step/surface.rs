@@ -2,7 +2,6 @@
 //! motion with the grid (like massless particles, with Nanson's formula for `n a`) and their
 //! checks, and the surface VC finds from the particles when no boundary points are given.
 
-use super::grid_to_particle::velocity_gradient;
 use crate::error::Result;
 use crate::grid::{DomainBox, Grid, GridNodes};
 use crate::integration::BoundaryPoints;
@@ -10,6 +9,7 @@ use crate::options::Walls;
 use crate::particles::Particles;
 use crate::shape::Stencils;
 use crate::{Matrix, Vector};
+use rayon::prelude::*;
 
 /// The new state of one boundary point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,15 +84,17 @@ pub(super) fn move_boundary_points<const D: usize>(
     dt: f64,
     updates: &mut Vec<BoundaryUpdate<D>>,
 ) {
-    updates.extend((0..boundary.len()).map(|b| {
-        let (ns, ws, _) = bs.of(b);
-        let v: Vector<D> = ns
-            .iter()
-            .zip(ws)
-            .map(|(&n, &w)| w * nodes.velocity[n])
-            .sum();
-        let f = (Matrix::<D>::identity() + dt * velocity_gradient(bs, nodes, b))
-            * boundary.deformation_gradient[b];
+    let moved = (0..boundary.len()).into_par_iter().map(|b| {
+        // The velocity and its gradient in one pass over the point's stencil.
+        let (ns, ws, gs) = bs.of(b);
+        let mut v = Vector::<D>::zeros();
+        let mut l = Matrix::<D>::zeros();
+        for ((&n, &w), g) in ns.iter().zip(ws).zip(gs) {
+            let vn = nodes.velocity[n];
+            v += w * vn;
+            l += vn * g.transpose();
+        }
+        let f = (Matrix::<D>::identity() + dt * l) * boundary.deformation_gradient[b];
         let j = crate::determinant(&f);
         let area_normal = f
             .try_inverse()
@@ -104,7 +106,8 @@ pub(super) fn move_boundary_points<const D: usize>(
             deformation_gradient: f,
             area_normal,
         }
-    }));
+    });
+    updates.par_extend(moved);
 }
 
 /// Keeps the moved boundary points on a wall on it (round-off may not push them out), then

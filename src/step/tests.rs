@@ -428,6 +428,42 @@ fn rejected_steps_keep_the_last_good_state() {
     assert_eq!(sim.particles, fresh.particles);
 }
 
+/// A rejected step keeps the found surface VC carries between refreshes as it was, whether the
+/// step would have carried it or found it anew; stepping on goes as a run that never saw it.
+#[test]
+fn rejected_steps_keep_the_carried_surface() {
+    let vc_block = || {
+        let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+        sim.set_integration(crate::Integration::Vc { order: 1 })
+            .unwrap();
+        sim.set_vc_surface_refresh(2).unwrap();
+        sim
+    };
+    let mut sim = vc_block();
+    let dt = sim.stable_dt(0.3).unwrap();
+    let out_of_grid = || -> Box<dyn crate::BodyForce<2>> {
+        Box::new(
+            |_t: f64, _x0: &[Vector<2>], _x: &[Vector<2>], a: &mut [Vector<2>]| {
+                a.iter_mut().for_each(|a| *a = Vector::<2>::new(1e12, 0.0));
+                Ok(())
+            },
+        )
+    };
+    let mut fresh = vc_block();
+    for step in 1..=3 {
+        // Step 2 carries the surface of step 1, step 3 finds it anew.
+        let before = (sim.particles.clone(), sim.vc_surface().clone());
+        sim.set_body_force(Some(out_of_grid()));
+        assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
+        assert_eq!((&sim.particles, sim.vc_surface()), (&before.0, &before.1));
+        sim.set_body_force(None);
+        sim.step(dt).unwrap();
+        fresh.step(dt).unwrap();
+        assert_eq!(sim.particles, fresh.particles, "step {step}");
+        assert_eq!(sim.vc_surface(), fresh.vc_surface(), "step {step}");
+    }
+}
+
 /// Spacing of [`block_by_columns`]: two particles per cell of the 32 × 32 unit grid.
 const BY_COLUMNS_SPACING: f64 = 1.0 / 64.0;
 

@@ -23,10 +23,7 @@ pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
     let mut clock = std::time::Instant::now();
     let found = vc.is_some() && inputs.boundary.is_empty();
     work.times.forces_and_vc += lap(&mut clock);
-    if found {
-        *surface = BoundaryPoints::default();
-    }
-    if found && contact.is_none() {
+    if found && contact.is_none() && inputs.surface_plan.find {
         *surface = found_surface(grid, ps, None)?;
     }
     work.times.surface += lap(&mut clock);

@@ -11,8 +11,9 @@
 //!
 //! Options: `--dim 2|3`, `--method linear|bspline2|bspline3|rk1|rk2`, `--vc` (VC integration of
 //! order 1, order 2 for rk2), `--vc-tolerance T` (the VC solve's tolerance, `rkmpm::VcSolve`;
-//! default the engine's), `--particles N` (rounded to m^D with m even), `--steps S` (timed
-//! steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
+//! default the engine's), `--surface-refresh K` (VC finds the surface every K steps,
+//! `Sim::set_vc_surface_refresh`; default the engine's, 4), `--particles N` (rounded to m^D
+//! with m even), `--steps S` (timed steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
 //! `--header` (print the CSV header first), `--phases` (time per phase on stderr),
 //! `--stored-stencils` (B-spline stencils stored node by node, as before the 1D factors),
@@ -58,6 +59,7 @@ struct Args {
     method: String,
     vc: bool,
     vc_tolerance: Option<f64>,
+    surface_refresh: Option<u32>,
     particles: usize,
     steps: usize,
     warmup: usize,
@@ -83,6 +85,7 @@ fn parse() -> Result<Args, String> {
         method: "bspline2".into(),
         vc: false,
         vc_tolerance: None,
+        surface_refresh: None,
         particles: 65536,
         steps: 50,
         warmup: 2,
@@ -108,6 +111,13 @@ fn parse() -> Result<Args, String> {
             "--dim" => a.dim = val()?.parse().map_err(|e| format!("--dim: {e}"))?,
             "--method" => a.method = val()?,
             "--vc" => a.vc = true,
+            "--surface-refresh" => {
+                a.surface_refresh = Some(
+                    val()?
+                        .parse()
+                        .map_err(|e| format!("--surface-refresh: {e}"))?,
+                )
+            }
             "--vc-tolerance" => {
                 a.vc_tolerance = Some(val()?.parse().map_err(|e| format!("--vc-tolerance: {e}"))?)
             }
@@ -137,7 +147,7 @@ fn parse() -> Result<Args, String> {
             "-h" | "--help" => {
                 return Err(
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
-                     [--vc] [--vc-tolerance T] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
+                     [--vc] [--vc-tolerance T] [--surface-refresh K] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
                      [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--energy] [--vtk DIR]"
@@ -209,6 +219,9 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     if a.vc {
         sim.set_integration(Integration::Vc { order: vc_order })
             .map_err(e)?;
+        if let Some(steps) = a.surface_refresh {
+            sim.set_vc_surface_refresh(steps).map_err(e)?;
+        }
         if let Some(tolerance) = a.vc_tolerance {
             let solve = rkmpm::VcSolve {
                 tolerance,

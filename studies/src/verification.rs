@@ -602,6 +602,10 @@ pub struct SelfWeightColumn {
     /// uniaxial, so the stress and pressure errors measure the column's solution against it:
     /// only its motion (settling) is meaningful.
     pub free_block: Option<usize>,
+    /// With VC: `Some(k)` integrates over the surface VC finds from the particles, found anew
+    /// every `k` steps (`Sim::set_vc_surface_refresh`), instead of the lattice's faces given as
+    /// boundary points.
+    pub found_surface: Option<u32>,
 }
 
 impl Default for SelfWeightColumn {
@@ -616,6 +620,7 @@ impl Default for SelfWeightColumn {
             hold: 1.0,
             jitter: 0.0,
             free_block: None,
+            found_surface: None,
         }
     }
 }
@@ -732,9 +737,13 @@ impl SelfWeightColumn {
             .collect();
         let vol = vec![q * q; x.len()];
         sim.add_particles(mat, &x, &vol, None)?;
-        if matches!(integration, Integration::Vc { .. }) {
-            let (bx, bn) = rkmpm::BoundaryPoints::<2>::from_lattice(&sites, &vol);
-            sim.add_boundary_points(&bx, &bn, None)?;
+        match self.found_surface {
+            Some(refresh) => sim.set_vc_surface_refresh(refresh)?,
+            None if matches!(integration, Integration::Vc { .. }) => {
+                let (bx, bn) = rkmpm::BoundaryPoints::<2>::from_lattice(&sites, &vol);
+                sim.add_boundary_points(&bx, &bn, None)?;
+            }
+            None => {}
         }
         setup(&mut sim)?;
         let dt = sim.stable_dt(0.3)? * 0.9;

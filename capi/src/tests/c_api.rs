@@ -943,6 +943,46 @@ fn checkpoint_through_the_c_api() {
     }
 }
 
+/// The found surface's refresh interval: the default, a refused zero that changes nothing, and
+/// a checkpoint that keeps it.
+#[test]
+fn vc_surface_refresh_through_the_c_api() {
+    let dir = std::env::temp_dir().join(format!("rkmpm-c-surface-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = std::ffi::CString::new(dir.join("a.rkmpm").to_str().unwrap()).unwrap();
+    let sim = sim2d(false);
+    unsafe {
+        let refresh = |s: *const RkmpmSim| {
+            let mut steps = 0u32;
+            assert_eq!(rkmpm_sim_vc_surface_refresh(s, &mut steps), RKMPM_OK);
+            steps
+        };
+        assert_eq!(refresh(sim), RKMPM_DEFAULT_VC_SURFACE_REFRESH);
+        assert_eq!(
+            rkmpm_sim_set_vc_surface_refresh(sim, 0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let message = last_error();
+        assert!(
+            message.starts_with("rkmpm_sim_set_vc_surface_refresh: "),
+            "{message}"
+        );
+        assert_eq!(refresh(sim), 4);
+        assert_eq!(
+            rkmpm_sim_vc_surface_refresh(sim, null_mut()),
+            RKMPM_ERR_NULL_POINTER
+        );
+        assert_eq!(rkmpm_sim_set_vc_surface_refresh(sim, 7), RKMPM_OK);
+        assert_eq!(rkmpm_sim_save(sim, path.as_ptr()), RKMPM_OK);
+        let mut copy = null_mut();
+        assert_eq!(rkmpm_sim_load(path.as_ptr(), &mut copy), RKMPM_OK);
+        assert_eq!(refresh(copy), 7);
+        rkmpm_sim_free(copy);
+        rkmpm_sim_free(sim);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The VC solve's stopping rule: the default, a refused rule that changes nothing, and a
 /// checkpoint that keeps the rule.
 #[test]
