@@ -140,7 +140,7 @@ impl<const D: usize> BoundaryPoints<D> {
     }
 
     /// The surface of the particles as they are now, found afresh (VC without given boundary
-    /// points, at every step), as a closed voxel surface. Each particle stands for its domain,
+    /// points, every `Sim::set_vc_surface_refresh` steps), as a closed voxel surface. Each particle stands for its domain,
     /// the cell of side `s = (V⁰_p)^{1/D}` carried by its deformation gradient,
     /// `x_p + F_p [−s/2, s/2]^D`, taken a little larger (`SURFACE_DOMAIN_SCALE`) so that
     /// neighbouring domains that do not quite meet still close. The voxels, aligned with

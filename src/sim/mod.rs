@@ -464,8 +464,8 @@ impl<const D: usize> Sim<D> {
     /// Adds boundary points (surface quadrature points for VC integration and tractions):
     /// positions on the surface, outward normals times area (length in 2D), and tractions (force
     /// per current area) or `None`. All or nothing. They move with the grid (Nanson for the
-    /// normals). Without any, VC finds the surface of the particles afresh at every step
-    /// ([`BoundaryPoints::of_particles`], [`Sim::vc_surface`]).
+    /// normals). Without any, VC finds the surface of the particles itself
+    /// ([`BoundaryPoints::of_particles`], [`Sim::vc_surface`], [`Sim::set_vc_surface_refresh`]).
     pub fn add_boundary_points(
         &mut self,
         positions: &[Vector<D>],

@@ -65,8 +65,6 @@ fn first_rejected_particle<const D: usize, S>(
     Some(Error::new(kind, message))
 }
 
-/// Keeps the boundary points' new positions inside the walls; the error for the first one
-/// outside the grid, if any.
 /// A carried found surface is the engine's own quadrature, not the caller's points: its moved
 /// points are kept inside the grid's box (the surface found from the particles ends at the box
 /// too), and where one cannot be carried (a non-finite value, an inverted `F_b`) none is: the
@@ -89,6 +87,8 @@ fn settle_carried_surface<const D: usize, S>(
     }
 }
 
+/// Keeps the boundary points' new positions inside the walls; the error for the first one
+/// outside the grid, if any.
 fn settle_boundary_points<const D: usize, S>(
     inputs: &StepInputs<'_, D, S>,
     updates: &mut [super::BoundaryUpdate<D>],
