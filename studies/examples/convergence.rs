@@ -18,15 +18,17 @@
 //! every run is in.
 //!
 //! The particles off the Gauss points (quarter points; jittered by ±30 %, three seeds; slip walls,
-//! and fixed walls on the low faces with slip walls on the high ones; 2D to 128 cells, 3D to 16)
-//! go to `docs/convergence/placed.md`, `placed_l2.png` and `placed3d_l2.png`:
-//! the cases where VC has something to correct.
+//! and fixed walls on the low faces with slip walls on the high ones; 2D to 128 cells, 3D to 24)
+//! go to `docs/convergence/placed.md`, `placed_l2.png`, `placed3d_l2.png` and the error against
+//! run time in `placed_time.png` and `placed3d_time.png`, with the run time to an L2 error of
+//! 1e-3 and 1e-4: the cases where VC has something to correct. Run it on one thread
+//! (`RAYON_NUM_THREADS=1`) for the run times the work-precision table compares.
 
 use plotters::prelude::*;
 use rkmpm::{Integration, Shape, Transfer};
 use rkmpm_studies::verification::{
-    fitted_slope, run_mms, run_mms_placed, AxisAlignedMms, ColumnRun, MmsRun, MmsWalls, Placement,
-    SelfWeightColumn, Surface,
+    fitted_slope, run_mms, run_mms_placed, time_to_error, AxisAlignedMms, ColumnRun, MmsRun,
+    MmsWalls, Placement, SelfWeightColumn, Surface, TimeToError,
 };
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -110,7 +112,7 @@ struct Row {
     run: Result<MmsRun, String>,
 }
 
-const COLORS: [RGBColor; 8] = [
+const COLORS: [RGBColor; 12] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -119,6 +121,10 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(140, 86, 75),
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(127, 127, 127),
+    RGBColor(0, 0, 128),
+    RGBColor(128, 0, 0),
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -477,7 +483,9 @@ fn plot(
 type Series = (String, RGBColor, Vec<(f64, f64)>);
 
 /// Draws `series` on log-log axes into `path`, with reference slopes 1, 2 and 3 through the
-/// coarsest point of the first series when `slopes` is set.
+/// coarsest point of the first series when `slopes` is set (error against `h`: the legend in the
+/// lower right); without them (error against run time) the legend goes to the upper right,
+/// where the long runs of large errors would be.
 fn draw_loglog(
     series: &[Series],
     caption: &str,
@@ -540,7 +548,10 @@ fn draw_loglog(
     }
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
+        .position(match slopes {
+            true => SeriesLabelPosition::LowerRight,
+            false => SeriesLabelPosition::UpperRight,
+        })
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()?;
@@ -549,11 +560,12 @@ fn draw_loglog(
 }
 
 /// The manufactured solution with the particles off the Gauss points, at the quarter points
-/// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the cubic B-spline with
-/// material-point integration and RK1 + VC1 with the surface found from the particles (what a
+/// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the quadratic and cubic B-splines
+/// with material-point integration and RK1 + VC1 with the surface found from the particles (what a
 /// user who gives no boundary points gets), between slip walls and between fixed (low) and slip
-/// (high) walls: 2D to 128 cells, 3D to 16. Writes `placed.md`
-/// (tables, band over the seeds, slopes), `placed_l2.png` and `placed3d_l2.png`.
+/// (high) walls: 2D to 128 cells, 3D to 24. Writes `placed.md`
+/// (tables, band over the seeds, slopes, run time to an error), `placed_l2.png`,
+/// `placed3d_l2.png`, `placed_time.png` and `placed3d_time.png`.
 /// One finished run of the off-Gauss study.
 #[derive(Debug, Clone, Copy)]
 struct Measured {
@@ -633,7 +645,7 @@ impl RunCache {
         use std::io::Write as _;
         writeln!(
             file,
-            "{key}\t{:e}\t{:e}\t{:.1}",
+            "{key}\t{:e}\t{:e}\t{:.3}",
             row.l2, row.energy, row.seconds
         )?;
         self.rows.insert(key, row);
@@ -661,12 +673,13 @@ fn placed_study(
         if quick { " --quick" } else { "" },
         rayon::current_num_threads()
     )?;
-    // 3D RK1 + VC1 takes 45 s at 16 cells and 600 s at 24 on one loaded thread (the node
-    // blocks: the 3D grids are below the V-cycle's width), so the 3D part stops at 16 cells.
+    // 3D RK1 + VC1 takes about 25 s at 16 cells and 130 s at 24 on one thread, 16 times
+    // as long per doubling of the cells (8 times the particles, twice the steps), so the 3D
+    // part stops at 24 cells (32 would take about 7 minutes a run).
     let (grids2, grids3): (&[usize], &[usize]) = if quick {
         (&[8, 16, 32], &[4, 6, 8])
     } else {
-        (&[8, 16, 32, 64, 128], &[8, 12, 16])
+        (&[8, 16, 32, 64, 128], &[8, 12, 16, 24])
     };
     let path = out.join("placed.md");
     let write =
@@ -695,6 +708,11 @@ fn placed_dimension<const D: usize>(
         support: 2.0,
     };
     let methods = [
+        (
+            "quadratic B-spline",
+            Shape::BSpline2,
+            Integration::MaterialPoint,
+        ),
         (
             "cubic B-spline",
             Shape::BSpline3,
@@ -733,6 +751,9 @@ fn placed_dimension<const D: usize>(
         "\n| particles | method | fitted L2 slope over the last three grids, each seed |\n|---|---|---|\n",
     );
     let mut series: Vec<Series> = Vec::new();
+    // Error against run time, per placement and method: each seed's `(L2, seconds)` by grid.
+    let mut work: Vec<Work> = Vec::new();
+    let mut timed: Vec<Series> = Vec::new();
     let mut complete = true;
     for (k, (pname, list, walls)) in placements.iter().enumerate() {
         let mms = AxisAlignedMms {
@@ -740,8 +761,9 @@ fn placed_dimension<const D: usize>(
             ..AxisAlignedMms::default()
         };
         for (j, &(mname, shape, integration)) in methods.iter().enumerate() {
-            let colour = COLORS[(2 * k + j) % COLORS.len()];
+            let colour = COLORS[(methods.len() * k + j) % COLORS.len()];
             let mut l2 = vec![Vec::new(); list.len()];
+            let mut runs_of = vec![Vec::new(); list.len()];
             for &cells in grids {
                 let mut errors = Vec::new();
                 for (s, &placement) in list.iter().enumerate() {
@@ -769,6 +791,7 @@ fn placed_dimension<const D: usize>(
                         run.l2, run.energy, run.seconds
                     );
                     l2[s].push(run.l2);
+                    runs_of[s].push((run.l2, run.seconds));
                     errors.push(run);
                 }
                 if !complete {
@@ -811,11 +834,16 @@ fn placed_dimension<const D: usize>(
                     _ => format!("{mname}, {pname}, seed {}", s + 1),
                 };
                 series.push((
-                    name,
+                    name.clone(),
                     colour,
                     h.iter().copied().zip(e.iter().copied()).collect(),
                 ));
+                if *walls == slip {
+                    let points = runs_of[s].iter().map(|&(e, t)| (t.max(1e-3), e)).collect();
+                    timed.push((name, colour, points));
+                }
             }
+            work.push((pname, mname, runs_of));
         }
     }
     if !complete {
@@ -827,7 +855,7 @@ fn placed_dimension<const D: usize>(
     } else {
         format!("placed{D}d_l2.png")
     };
-    writeln!(md, "\n![{D}D: L2 error against h]({png})\n")?;
+    writeln!(md, "\n![{D}D: L2 error against h]({png})")?;
     draw_loglog(
         &series,
         &format!("{D}D manufactured solution off the Gauss points: L2 error against h"),
@@ -836,7 +864,90 @@ fn placed_dimension<const D: usize>(
         &out.join(png),
         true,
     )?;
+    work_precision(md, &work)?;
+    let time_png = if D == 2 {
+        "placed_time.png".to_string()
+    } else {
+        format!("placed{D}d_time.png")
+    };
+    writeln!(
+        md,
+        "\n![{D}D: L2 error against run time, slip walls]({time_png})\n"
+    )?;
+    draw_loglog(
+        &timed,
+        &format!("{D}D off the Gauss points, slip walls: L2 error against run time"),
+        "run time (s)",
+        "L2 error",
+        &out.join(time_png),
+        false,
+    )?;
     Ok(true)
+}
+
+/// One placement and method of the off-Gauss study: their names and each seed's `(L2 error,
+/// seconds)` by grid.
+type Work<'a> = (&'a str, &'a str, Vec<Vec<(f64, f64)>>);
+
+/// The errors the work-precision table asks each method to reach.
+const WORK_TARGETS: [f64; 2] = [1e-3, 1e-4];
+
+/// The run time to each of [`WORK_TARGETS`] per placement and method (every seed), and its
+/// ratio to the fastest B-spline's for the same particles (the slowest seed of each).
+fn work_precision(md: &mut String, work: &[Work]) -> Result<(), Box<dyn std::error::Error>> {
+    let seconds = |t: f64| match t {
+        t if t >= 100.0 => format!("{t:.0}"),
+        t if t >= 10.0 => format!("{t:.1}"),
+        t if t >= 1.0 => format!("{t:.2}"),
+        t => format!("{t:.3}"),
+    };
+    let cell = |r: &TimeToError| match *r {
+        TimeToError::Between(t) => seconds(t),
+        TimeToError::AtMost(t) => format!("≤ {}", seconds(t)),
+        TimeToError::Never(e) => format!("never ({e:.2e})"),
+    };
+    // The slowest seed's time, `None` when a seed never reaches the error.
+    let worst = |runs: &[Vec<(f64, f64)>], target: f64| -> Option<f64> {
+        runs.iter()
+            .map(|r| match time_to_error(r, target) {
+                TimeToError::Between(t) | TimeToError::AtMost(t) => Some(t),
+                TimeToError::Never(_) => None,
+            })
+            .try_fold(0.0f64, |a, t| t.map(|t| a.max(t)))
+    };
+    writeln!(
+        md,
+        "\nWork-precision: the run time to an L2 error of 1e-3 and 1e-4 (log-log interpolation \
+         between the two grids around it, each seed; \"≤\": already on the coarsest grid; \
+         \"never\": no grid gets there, with the smallest error), and its ratio to the fastest \
+         B-spline's for the same particles (slowest seed of each).\n\n\
+         | particles | method | to 1e-3 (s) | to 1e-4 (s) | ratio to the best B-spline, 1e-3 | 1e-4 |\n\
+         |---|---|---|---|---|---|"
+    )?;
+    for &(pname, mname, ref runs) in work {
+        let mut cols = Vec::new();
+        for target in WORK_TARGETS {
+            let each: Vec<String> = runs
+                .iter()
+                .map(|r| cell(&time_to_error(r, target)))
+                .collect();
+            cols.push(each.join(", "));
+        }
+        for target in WORK_TARGETS {
+            let best = work
+                .iter()
+                .filter(|w| w.0 == pname && w.1.contains("B-spline"))
+                .filter_map(|w| worst(&w.2, target))
+                .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.min(t))));
+            cols.push(match (worst(runs, target), best) {
+                (Some(t), Some(b)) => format!("{:.2}", t / b),
+                (Some(_), None) => "no B-spline gets there".to_string(),
+                (None, _) => "—".to_string(),
+            });
+        }
+        writeln!(md, "| {pname} | {mname} | {} |", cols.join(" | "))?;
+    }
+    Ok(())
 }
 
 /// The nearly incompressible column (ν = 0.49) with jittered particles: pressure against the exact

@@ -431,6 +431,37 @@ pub fn fitted_slope(h: &[f64], error: &[f64]) -> f64 {
     least_squares_line(&points).0
 }
 
+/// How long a method takes to reach an error, from its runs on a sequence of refining grids.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TimeToError {
+    /// Reached between two grids: the run time interpolated on log-log axes between the last
+    /// grid above the error and the first at or below it.
+    Between(f64),
+    /// Already at or below it on the coarsest grid: at most that grid's run time.
+    AtMost(f64),
+    /// No grid reached it: the smallest error over the grids.
+    Never(f64),
+}
+
+/// The run time to reach the error `target`, from the `(error, seconds)` of one method's runs on
+/// refining grids in order. Between the last grid above `target` and the first at or below it,
+/// `log t` is interpolated linearly in `log error` (a run time of zero is taken as one
+/// millisecond, the resolution of the records).
+pub fn time_to_error(runs: &[(f64, f64)], target: f64) -> TimeToError {
+    let Some(k) = runs.iter().position(|&(e, _)| e <= target) else {
+        let best = runs.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        return TimeToError::Never(best);
+    };
+    let seconds = |t: f64| t.max(1e-3);
+    if k == 0 {
+        return TimeToError::AtMost(seconds(runs[0].1));
+    }
+    let ((e0, t0), (e1, t1)) = (runs[k - 1], runs[k]);
+    let (t0, t1) = (seconds(t0), seconds(t1));
+    let s = (target.ln() - e0.ln()) / (e1.ln() - e0.ln());
+    TimeToError::Between((t0.ln() + s * (t1.ln() - t0.ln())).exp())
+}
+
 /// The least-squares line `y = slope x + intercept` through `(x, y)` points: `(slope,
 /// intercept)` (NaN with fewer than two distinct `x`).
 pub fn least_squares_line(points: &[(f64, f64)]) -> (f64, f64) {
@@ -486,6 +517,25 @@ mod tests {
         let h = [0.1, 0.05, 0.025];
         let e: Vec<f64> = h.iter().map(|v: &f64| 3.0 * v.powf(2.5)).collect();
         assert!((fitted_slope(&h, &e) - 2.5).abs() < 1e-12);
+    }
+
+    /// On log-log axes the interpolation is exact for a power law `t = c e^(−k)`; a target above
+    /// the coarsest grid's error or below every grid's is said so.
+    #[test]
+    fn time_to_error_interpolates_a_power_law() {
+        let runs: Vec<(f64, f64)> = [1e-2, 2.5e-3, 6.25e-4, 1.5625e-4]
+            .iter()
+            .map(|&e: &f64| (e, 3.0 * e.powf(-1.5)))
+            .collect();
+        let TimeToError::Between(t) = time_to_error(&runs, 1e-3) else {
+            panic!("1e-3 lies between the second and third grids");
+        };
+        assert!((t / (3.0 * 1e-3f64.powf(-1.5)) - 1.0).abs() < 1e-12);
+        assert_eq!(time_to_error(&runs, 2e-2), TimeToError::AtMost(runs[0].1));
+        assert_eq!(time_to_error(&runs, 1e-4), TimeToError::Never(1.5625e-4));
+        // A stalled method: the error stops falling above the target.
+        let stalled = [(9e-3, 0.1), (6e-3, 1.0), (6.1e-3, 10.0)];
+        assert_eq!(time_to_error(&stalled, 1e-3), TimeToError::Never(6e-3));
     }
 
     fn points<const D: usize>() -> Vec<Vector<D>> {
