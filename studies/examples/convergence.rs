@@ -559,13 +559,6 @@ fn draw_loglog(
     Ok(())
 }
 
-/// The manufactured solution with the particles off the Gauss points, at the quarter points
-/// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the quadratic and cubic B-splines
-/// with material-point integration and RK1 + VC1 with the surface found from the particles (what a
-/// user who gives no boundary points gets), between slip walls and between fixed (low) and slip
-/// (high) walls: 2D to 128 cells, 3D to 24. Writes `placed.md`
-/// (tables, band over the seeds, slopes, run time to an error), `placed_l2.png`,
-/// `placed3d_l2.png`, `placed_time.png` and `placed3d_time.png`.
 /// One finished run of the off-Gauss study.
 #[derive(Debug, Clone, Copy)]
 struct Measured {
@@ -653,7 +646,15 @@ impl RunCache {
     }
 }
 
-/// The study off the Gauss points; `false` when the budget ran out before every run was in.
+/// The manufactured solution with the particles off the Gauss points, at the quarter points
+/// and jittered by ±30 % of their spacing (seeds 1, 2, 3), for the quadratic and cubic B-splines
+/// with material-point integration and RK1 + VC1 with the surface found from the particles (what a
+/// user who gives no boundary points gets), between slip walls and between fixed (low) and slip
+/// (high) walls: 2D to 128 cells, 3D to 24. Writes `placed.md`
+/// (tables, band over the seeds, slopes, run time to an error), `placed_l2.png`,
+/// `placed3d_l2.png`, `placed_time.png` and `placed3d_time.png`.
+///
+/// `false` when the budget ran out before every run was in.
 fn placed_study(
     out: &Path,
     quick: bool,
