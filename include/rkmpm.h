@@ -11,7 +11,8 @@
  *    which is x(dim, n) in Fortran with no copy.
  *  - Ownership: an RkmpmSim is created by rkmpm_sim_new and released by rkmpm_sim_free.
  *  - Threads: one thread at a time per simulation; different simulations may run on
- *    different threads at once. The engine uses its own worker threads (rayon) inside a step.
+ *    different threads at once. A step runs on worker threads (rayon): the process-wide pool
+ *    (RAYON_NUM_THREADS, or one per core), or the simulation's own (rkmpm_sim_set_threads).
  */
 
 #ifndef RKMPM_H
@@ -52,6 +53,11 @@
  * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
  */
 #define RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS 2000
+
+/**
+ * The most worker threads `rkmpm_sim_set_threads` starts for one simulation.
+ */
+#define RKMPM_MAX_THREADS 4096
 
 /**
  * Result of every C API call that can fail. `RKMPM_OK` is 0; every other value names a kind of
@@ -910,6 +916,30 @@ enum RkmpmStatus rkmpm_sim_set_vc_surface_refresh(struct RkmpmSim *sim, uint32_t
  * `sim` must be a live handle; `out_steps` valid for a write.
  */
 enum RkmpmStatus rkmpm_sim_vc_surface_refresh(const struct RkmpmSim *sim, uint32_t *out_steps);
+
+/**
+ * Gives the simulation its own `threads` worker threads (0: one per core the process may use),
+ * on which its steps run whatever other simulations or the host's threads do. Until this is
+ * called a simulation runs on the library's process-wide pool (`RAYON_NUM_THREADS` threads,
+ * or one per core), shared by every simulation. Results are the same to the last bit for any
+ * count. Two simulations may step at once on two host threads, each on its own threads. May
+ * change between steps; not part of a checkpoint (a loaded simulation takes the shared
+ * pool). Refuses more than `RKMPM_MAX_THREADS` (`RKMPM_ERR_INVALID_ARGUMENT`); threads the
+ * system cannot start give `RKMPM_ERR_OUT_OF_MEMORY`; a refused call changes nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_threads(struct RkmpmSim *sim, uint32_t threads);
+
+/**
+ * Writes the number of worker threads the simulation's steps run on (`rkmpm_sim_set_threads`,
+ * or the size of the shared pool) to `*out_threads`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_threads` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_threads(const struct RkmpmSim *sim, uint32_t *out_threads);
 
 /**
  * Writes the stopping rule of VC's solve in force (`rkmpm_sim_set_vc_solve`: the one given, or the

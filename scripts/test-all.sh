@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Every test of rkmpm: the Rust unit, integration and doc tests (the header check among them),
-# the parallel node-sum primitives' tests under Miri (scripts/test-miri.sh),
+# the parallel primitives' tests under Miri (scripts/test-miri.sh),
 # every C and Fortran block of the docs compiled and run (scripts/test-doc-snippets.sh), the VTK
 # output read back with meshio (scripts/test-vtk.sh), then the C and Fortran drivers built by
 # CMake and run under CTest, then the installed package
@@ -36,7 +36,7 @@ echo "== Rust tests (cargo test --release --tests, then --doc)"
 cargo test --release --tests
 cargo test --release --doc
 
-echo "== The parallel node-sum primitives under Miri (skipped, saying so, without a nightly)"
+echo "== The parallel primitives under Miri (skipped, saying so, without a nightly)"
 ./scripts/test-miri.sh
 
 echo "== Every C and Fortran block of README.md and docs/*.md compiles and runs; rustdoc without warnings"

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Miri on the tests of the parallel node-sum primitives (src/grid/shared.rs): out-of-bounds or
-# misaligned accesses and data races between the threads fail them. Needs a nightly toolchain
+# Miri on the tests of the parallel primitives: the node sums' shared slices and scatter
+# (src/grid/shared.rs), particle to grid's coloured schedule (src/grid/blocks.rs) and the new
+# state's writer (src/step/grid_to_particle.rs). Out-of-bounds or misaligned accesses and data
+# races between the threads fail them. Needs a nightly toolchain
 # with the miri component: installed with rustup when missing (minimal profile); where that
 # cannot be done (no rustup, no network), says so plainly and skips, exit status 0.
 #   scripts/test-miri.sh
@@ -31,4 +33,4 @@ if ! cargo +nightly miri --version >/dev/null 2>&1; then
 fi
 echo "== $(cargo +nightly miri --version)"
 MIRIFLAGS="-Zmiri-tree-borrows -Zmiri-permissive-provenance -Zmiri-ignore-leaks" \
-  cargo +nightly miri test -p rkmpm --lib grid::shared
+  cargo +nightly miri test -p rkmpm --lib -- grid::shared grid::blocks step::grid_to_particle

@@ -24,11 +24,23 @@
 //! assert_eq!(sim.steps(), 1);
 //! ```
 
-// The unsafe operations are defined in two audited places: the parallel node sums' primitives
-// (`grid/shared.rs`, whose header states the one invariant) and the SIMD kernels
-// (`shape/simd.rs`, entered through `cpu::Lanes`). The phases call them in
-// `unsafe` blocks, each with a `SAFETY:` comment naming the schedule that makes it sound.
-// Miri runs the primitives' tests (`scripts/test-miri.sh`).
+// Where the engine uses `unsafe`, and why (every block carries a `SAFETY:` comment naming the
+// contract it keeps; the runner and the studies forbid `unsafe`):
+// - Parallel writes into one array, each element by one thread at a time: the primitives of
+//   `grid/shared.rs` (`SharedSlice`, `NodeScatter`, `scatter_add`, `NodeList`; that invariant is
+//   in its header) and `NewStateWriter` over them (`step/grid_to_particle.rs`). Their callers
+//   keep the invariant by a schedule and name it: particle to grid's coloured tasks
+//   (`Bins::run_tasks` in `grid/blocks.rs`) for the scatters of `step/particle_to_grid.rs`,
+//   `shape/stencil.rs` and VC's sums in `integration/mod.rs`; one node per task in
+//   `step/grid_update.rs`, the reset in `grid/mod.rs`, the active list in `grid/blocks.rs` and
+//   the rows of `integration/node_operator.rs`; one particle per task in
+//   `step/grid_to_particle.rs` and `step/constitutive_update.rs`; disjoint stretches in the
+//   particles' sort (`grid/blocks.rs`).
+// - The SIMD kernels of `shape/simd.rs`, `unsafe fn`s whose one precondition is AVX2 and FMA,
+//   called from `shape/stencil.rs` only under `cpu::Lanes::avx2()`, which `cpu.rs` sets after
+//   checking the processor.
+// Miri runs the tests of the shared primitives, the coloured schedule and the new state's writer
+// (`scripts/test-miri.sh`).
 #![deny(unsafe_op_in_unsafe_fn)]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
@@ -45,8 +57,12 @@ pub(crate) mod energy;
 pub mod error;
 pub mod io;
 pub mod material;
+pub mod math;
 pub mod options;
 pub mod particles;
+/// The plain serial step the fast one is tested against (tests only).
+#[cfg(test)]
+mod reference;
 pub mod sim;
 
 // The engine's internals: private, or public with the feature `internals` (for the per-phase
@@ -89,70 +105,10 @@ pub use integration::{BoundaryPoints, VcSolve};
 pub use material::Material;
 pub use particles::{Field, Particles};
 pub use shape::{Shape, UniformRng};
-pub use sim::{BodyForce, Integration, Scheme, Sim, Transfer, DEFAULT_VC_SURFACE_REFRESH};
+pub use sim::{
+    BodyForce, Integration, Scheme, Sim, Transfer, DEFAULT_VC_SURFACE_REFRESH, MAX_THREADS,
+};
+pub use step::{MemoryUse, PhaseTimes};
 pub use walls::{Side, Wall};
 
-/// A column vector of the simulation's dimension.
-pub type Vector<const D: usize> = nalgebra::SVector<f64, D>;
-/// A square matrix of the simulation's dimension.
-pub type Matrix<const D: usize> = nalgebra::SMatrix<f64, D, D>;
-
-/// `⌊x⌋` as an integer, without the library call `f64::floor` makes on baseline x86-64 (the
-/// same value for every `x`, saturating at the ends of `i64` like `x.floor() as i64`).
-#[inline(always)]
-pub fn floor_index(x: f64) -> i64 {
-    let t = x as i64;
-    t.saturating_sub(((t as f64) > x) as i64)
-}
-
-/// Determinant of a `D×D` matrix (closed form for 1, 2 and 3; LU beyond).
-#[inline]
-pub fn determinant<const D: usize>(m: &Matrix<D>) -> f64 {
-    match D {
-        1 => m[(0, 0)],
-        2 => m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)],
-        3 => {
-            m[(0, 0)] * (m[(1, 1)] * m[(2, 2)] - m[(1, 2)] * m[(2, 1)])
-                - m[(0, 1)] * (m[(1, 0)] * m[(2, 2)] - m[(1, 2)] * m[(2, 0)])
-                + m[(0, 2)] * (m[(1, 0)] * m[(2, 1)] - m[(1, 1)] * m[(2, 0)])
-        }
-        _ => nalgebra::DMatrix::from_column_slice(D, D, m.as_slice()).determinant(),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    /// `floor_index` is `x.floor() as i64` everywhere: near integers, at ±0, at the ends of
-    /// `i64`, beyond them, at infinities and NaN.
-    #[test]
-    fn floor_index_is_the_floor() {
-        let mut xs = vec![0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e300, -1e300];
-        xs.extend([
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            f64::MIN_POSITIVE,
-            -f64::MIN_POSITIVE,
-        ]);
-        xs.extend([
-            9.2e18,
-            -9.2e18,
-            9.3e18,
-            -9.3e18,
-            -9_223_372_036_854_775_808.0,
-        ]);
-        for k in -1000..1000 {
-            let x = k as f64 * 0.173;
-            xs.extend([
-                x,
-                x.next_up(),
-                x.next_down(),
-                k as f64,
-                (k as f64).next_down(),
-            ]);
-        }
-        for x in xs {
-            assert_eq!(super::floor_index(x), x.floor() as i64, "x = {x:e}");
-        }
-    }
-}
+pub use math::{determinant, floor_index, Matrix, Vector};

@@ -1,12 +1,10 @@
 //! The engine's integration tests, one module per file of this directory, linked into one test
 //! binary: a release build instantiates the engine's generic step once per binary, so one binary
-//! instead of seven saves most of their build time. Run one file's tests with
+//! instead of five saves most of their build time. Run one file's tests with
 //! `cargo test --release --test engine vc_conservation::`.
 
-mod checkpoint;
 mod contact;
 mod energies;
 mod run_bounds;
 mod stress;
 mod vc_conservation;
-mod vibrating_bar;

@@ -51,6 +51,8 @@ module rkmpm
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4
+   ! The most worker threads sim%set_threads starts for one simulation.
+   integer(c_int32_t), parameter, public :: RKMPM_MAX_THREADS = 4096
 
    ! enum RkmpmStatus (a C enum: int-sized)
    integer(c_int), parameter, public :: RKMPM_OK = 0
@@ -235,6 +237,8 @@ module rkmpm
       procedure :: vc_solve => sim_vc_solve
       procedure :: set_vc_surface_refresh => sim_set_vc_surface_refresh
       procedure :: vc_surface_refresh => sim_vc_surface_refresh
+      procedure :: set_threads => sim_set_threads
+      procedure :: threads => sim_threads
       procedure :: time => sim_time
       procedure :: energies => sim_energies
       procedure :: momenta => sim_momenta
@@ -594,6 +598,22 @@ module rkmpm
          type(c_ptr), value :: sim
          integer(c_int32_t), intent(out) :: out_steps
       end function rkmpm_sim_vc_surface_refresh
+
+      ! enum RkmpmStatus rkmpm_sim_set_threads(struct RkmpmSim *sim, uint32_t threads);
+      integer(c_int) function rkmpm_sim_set_threads(sim, threads) &
+            bind(C, name="rkmpm_sim_set_threads")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: threads
+      end function rkmpm_sim_set_threads
+
+      ! enum RkmpmStatus rkmpm_sim_threads(const struct RkmpmSim *sim, uint32_t *out_threads);
+      integer(c_int) function rkmpm_sim_threads(sim, out_threads) &
+            bind(C, name="rkmpm_sim_threads")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), intent(out) :: out_threads
+      end function rkmpm_sim_threads
 
       ! enum RkmpmStatus rkmpm_sim_time(const struct RkmpmSim *sim, double *out_time);
       integer(c_int) function rkmpm_sim_time(sim, out_time) bind(C, name="rkmpm_sim_time")
@@ -1408,6 +1428,39 @@ contains
       if (present(errmsg)) errmsg = text
       sim_vc_surface_refresh = n
    end function sim_vc_surface_refresh
+
+   !> Gives the simulation its own `threads` worker threads (0: one per core), on which its
+   !> steps run whatever other simulations or the host's threads (OpenMP's among them) do; until
+   !> then it runs on the library's process-wide pool (RAYON_NUM_THREADS threads, or one per
+   !> core). The same results to the last bit for any count. Refuses a negative count or more
+   !> than RKMPM_MAX_THREADS. Not part of a checkpoint.
+   subroutine sim_set_threads(self, threads, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: threads
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      if (threads < 0) then
+         call report(RKMPM_ERR_INVALID_ARGUMENT, 'set_threads', stat, text, &
+            'threads must not be negative (0 for one per core)')
+      else
+         call report(rkmpm_sim_set_threads(self%h, threads), 'set_threads', stat, text)
+      end if
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_threads
+
+   !> The number of worker threads the simulation's steps run on (sim%set_threads).
+   integer(c_int32_t) function sim_threads(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: n
+      n = 0
+      call report(rkmpm_sim_threads(self%h, n), 'threads', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_threads = n
+   end function sim_threads
 
    !> The energies of the particles now.
    type(rkmpm_energies) function sim_energies(self, stat, errmsg)

@@ -1313,6 +1313,50 @@ pub unsafe extern "C" fn rkmpm_sim_vc_surface_refresh(
     })
 }
 
+/// The most worker threads `rkmpm_sim_set_threads` starts for one simulation.
+pub const RKMPM_MAX_THREADS: u32 = 4096;
+const _: () = assert!(RKMPM_MAX_THREADS as usize == rkmpm::MAX_THREADS);
+
+/// Gives the simulation its own `threads` worker threads (0: one per core the process may use),
+/// on which its steps run whatever other simulations or the host's threads do. Until this is
+/// called a simulation runs on the library's process-wide pool (`RAYON_NUM_THREADS` threads,
+/// or one per core), shared by every simulation. Results are the same to the last bit for any
+/// count. Two simulations may step at once on two host threads, each on its own threads. May
+/// change between steps; not part of a checkpoint (a loaded simulation takes the shared
+/// pool). Refuses more than `RKMPM_MAX_THREADS` (`RKMPM_ERR_INVALID_ARGUMENT`); threads the
+/// system cannot start give `RKMPM_ERR_OUT_OF_MEMORY`; a refused call changes nothing.
+///
+/// # Safety
+/// `sim` must be a live handle.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_set_threads(sim: *mut RkmpmSim, threads: u32) -> RkmpmStatus {
+    gate("rkmpm_sim_set_threads", || {
+        // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
+        let s = unsafe { sim_mut(sim) }?;
+        with_sim!(&mut s.sim, m => m.set_threads(threads as usize))?;
+        Ok(())
+    })
+}
+
+/// Writes the number of worker threads the simulation's steps run on (`rkmpm_sim_set_threads`,
+/// or the size of the shared pool) to `*out_threads`.
+///
+/// # Safety
+/// `sim` must be a live handle; `out_threads` valid for a write.
+#[no_mangle]
+pub unsafe extern "C" fn rkmpm_sim_threads(
+    sim: *const RkmpmSim,
+    out_threads: *mut u32,
+) -> RkmpmStatus {
+    gate("rkmpm_sim_threads", || {
+        // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
+        let s = unsafe { sim_ref(sim) }?;
+        let threads = with_sim!(&s.sim, m => m.threads());
+        // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
+        unsafe { write_out("out_threads", out_threads, threads as u32) }
+    })
+}
+
 /// Writes the stopping rule of VC's solve in force (`rkmpm_sim_set_vc_solve`: the one given, or the
 /// automatic rule for the simulation's VC order and grid) to `*out_tolerance` and
 /// `*out_max_iterations`; neither is written unless both pointers are valid.

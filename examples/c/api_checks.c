@@ -1031,6 +1031,33 @@ static void lifetime_rows(void) {
     CALL(f.sim, rkmpm_sim_vc_surface_refresh(f.sim, misaligned(raw)));
     drop(&f);
   }
+  ROW("set_threads.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_threads(NULL, 2));
+  }
+  ROW("set_threads.too_many", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_threads(f.sim, 2));
+    CALL(f.sim, rkmpm_sim_set_threads(f.sim, RKMPM_MAX_THREADS + 1));
+    uint32_t threads = 0;
+    RKMPM_CHECK(rkmpm_sim_threads(f.sim, &threads));
+    EXPECT(threads == 2, "the simulation runs on %u threads", (unsigned)threads);
+    drop(&f);
+  }
+  ROW("threads.null_sim", RKMPM_ERR_NULL_POINTER) {
+    uint32_t threads = 77;
+    CALL(NULL, rkmpm_sim_threads(NULL, &threads));
+    EXPECT(threads == 77, "wrote the output after a failure");
+  }
+  ROW("threads.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_threads(f.sim, NULL));
+    drop(&f);
+  }
+  ROW("threads.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_threads(f.sim, misaligned(raw)));
+    drop(&f);
+  }
 }
 
 static void option_rows(void) {

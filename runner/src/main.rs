@@ -10,7 +10,6 @@ use rkmpm::io::vtk::VtkSeries;
 use rkmpm::sim::{Energies, Momenta};
 use rkmpm::Sim;
 use rkmpm_runner::scene::{Scene, SceneSim, BUNDLED};
-use rkmpm_studies::scenes::{run_vibrating_bar, VibratingBar};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -54,15 +53,6 @@ enum Command {
         /// The name of a bundled scene.
         name: String,
     },
-    /// Run the vibrating bar against its exact solution and print the errors.
-    Verify {
-        /// `bar2d` or `bar3d`.
-        #[arg(value_parser = ["bar2d", "bar3d"])]
-        problem: String,
-        /// Directory for the final VTK frame.
-        #[arg(long, default_value = "out")]
-        out: PathBuf,
-    },
 }
 
 #[derive(clap::Args)]
@@ -97,7 +87,8 @@ struct RunArgs {
     /// y = SECTION (m); default the middle of the bodies.
     #[arg(long, value_name = "Y")]
     section: Option<f64>,
-    /// Worker threads (default: all cores). Results do not depend on it.
+    /// Overrides the scene's run.threads: the simulation's worker threads (0 or default: one
+    /// per core). Results do not depend on it.
     #[arg(long)]
     threads: Option<usize>,
     /// No progress bar, only the summary.
@@ -131,12 +122,6 @@ fn main() -> ExitCode {
             }
             None => Err(format!("no bundled scene {name:?} (rkmpm list)")),
         },
-        Command::Verify { problem, out } => std::fs::create_dir_all(&out)
-            .map_err(|e| format!("cannot create {}: {e}", out.display()))
-            .and_then(|_| match problem.as_str() {
-                "bar2d" => bar::<2>(&out),
-                _ => bar::<3>(&out),
-            }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -312,17 +297,14 @@ fn scene_of(args: &RunArgs) -> Result<Scene, String> {
     if args.section.is_some() {
         scene.run.section = args.section;
     }
+    if args.threads.is_some() {
+        scene.run.threads = args.threads;
+    }
     Ok(scene)
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
     let scene = scene_of(&args)?;
-    if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .map_err(|e| format!("--threads {n}: {e}"))?;
-    }
     let built = validate(&scene)?;
     std::fs::create_dir_all(&args.out)
         .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
@@ -764,35 +746,4 @@ fn summary<const D: usize>(
             series.prefix().display()
         );
     }
-}
-
-fn bar<const D: usize>(out: &Path) -> Result<(), String> {
-    let bar = VibratingBar::default();
-    let mut sim = bar.build::<D>().map_err(|e| e.to_string())?;
-    println!(
-        "scene: axial vibrating bar in {D}D, {} particles, {} cells along the bar",
-        sim.particle_count(),
-        bar.cells_along
-    );
-    let start = Instant::now();
-    let r = run_vibrating_bar(&bar, &mut sim, 0.2).map_err(|e| e.to_string())?;
-    let mut series = VtkSeries::new(out.join(format!("bar{D}d")));
-    series.write_frame(&sim).map_err(|e| e.to_string())?;
-    println!(
-        "steps: {}, wall time {:.2} s",
-        r.steps,
-        start.elapsed().as_secs_f64()
-    );
-    println!(
-        "period: {:.6} s (exact {:.6} s, error {:.3}%)",
-        r.period,
-        r.exact_period,
-        100.0 * (r.period - r.exact_period).abs() / r.exact_period
-    );
-    println!(
-        "mean-velocity history: largest error {:.3}% of the amplitude",
-        100.0 * r.velocity_error
-    );
-    println!("output: {}.pvd", series.prefix().display());
-    Ok(())
 }

@@ -391,6 +391,10 @@ pub struct RunSpec {
     /// step shrinks on the way stops when it has taken them (its frames so far stay written).
     #[serde(default = "default_max_steps")]
     pub max_steps: u64,
+    /// The simulation's own worker threads (0: one per core); default the process-wide pool.
+    /// Results do not depend on it.
+    #[serde(default)]
+    pub threads: Option<usize>,
 }
 
 fn default_output() -> String {
@@ -558,6 +562,9 @@ impl Scene {
                 "run.end_time must be positive, got {}",
                 self.run.end_time
             )));
+        }
+        if let Some(n) = self.run.threads {
+            sim.set_threads(n).map_err(context("run"))?;
         }
         let first = sim.stable_dt(self.run.cfl).map_err(context("run"))?;
         let max = self.run.max_steps;
@@ -1079,6 +1086,34 @@ mod tests {
         );
         let e = rule(&bar).unwrap_err();
         assert!(e.contains("options.vc_tolerance does nothing here"), "{e}");
+    }
+
+    /// `run.threads` gives the simulation (and its comparison) threads of its own; more than
+    /// the engine's bound is refused with the bound.
+    #[test]
+    fn run_threads_go_to_the_simulations() {
+        let good = BUNDLED[0].1;
+        let with = |extra: &str| good.replace("[run]\n", &format!("[run]\n{extra}\n"));
+        let threads = |text: &str| {
+            let scene = Scene::from_toml(text, "x").unwrap();
+            let own = match scene.build() {
+                Ok(SceneSim::D2(sim)) => sim.threads(),
+                Ok(SceneSim::D3(sim)) => sim.threads(),
+                Err(e) => return Err(e.message),
+            };
+            match scene.comparison().map(|c| c.build()) {
+                Some(Ok(SceneSim::D2(sim))) => assert_eq!(sim.threads(), own),
+                Some(Ok(SceneSim::D3(sim))) => assert_eq!(sim.threads(), own),
+                Some(Err(e)) => return Err(e.message),
+                None => {}
+            }
+            Ok(own)
+        };
+        let shared = Sim::<2>::new([0.0, 0.0], [4, 4], 1.0).unwrap().threads();
+        assert_eq!(threads(good), Ok(shared));
+        assert_eq!(threads(&with("threads = 3")), Ok(3));
+        let e = threads(&with("threads = 5000")).unwrap_err();
+        assert!(e.contains("run: threads must be at most 4096"), "{e}");
     }
 
     /// `run.max_steps` bounds the run: a scene whose estimate exceeds it is refused before the

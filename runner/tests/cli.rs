@@ -215,7 +215,6 @@ fn help_and_listing() {
         "check",
         "list",
         "show",
-        "verify",
         "--out",
         "--end-time",
         "--frames",

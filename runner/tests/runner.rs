@@ -3,4 +3,3 @@
 
 mod cli;
 mod pictures;
-mod scene_files;

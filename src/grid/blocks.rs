@@ -528,3 +528,92 @@ impl<const D: usize> Bins<D> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{scatter_add, NodeScatter};
+    use crate::options::Shape;
+    use crate::shape::{Stencils, UniformRng};
+
+    /// Particle to grid's schedule ([`Bins::run_tasks`]) from three threads: each particle adds
+    /// its quadratic B-spline weights to its nodes' masses, and every node's sum is the one
+    /// thread's to the last bit (each node summed in one order whatever the threads do) and
+    /// the plain serial sum's to round-off. The grid is 300 × 14 cells, so the particles fill
+    /// three blocks along x and four rows of blocks, whose tasks share nodes across every
+    /// block face. Run under Miri by `scripts/test-miri.sh`, where two running tasks writing
+    /// one node would be a data race.
+    #[test]
+    fn coloured_tasks_sum_every_node_in_one_order() {
+        let shape = Shape::BSpline2.build::<2>().unwrap();
+        let mut grid = Grid::<2>::new(Vector::zeros(), [300, 14], 0.1).unwrap();
+        grid.set_ghost_layers(shape.ghost_layers()).unwrap();
+        let mut rng = UniformRng::new(5);
+        let x: Vec<Vector<2>> = (0..240)
+            .map(|_| Vector::<2>::new(30.0 * rng.uniform(), 1.4 * rng.uniform()))
+            .collect();
+        let mut bins = Bins::<2>::default();
+        crate::shape::bin_particles(&mut bins, shape.as_ref(), &grid, &x);
+        let tasks: usize = bins.tasks.iter().map(Vec::len).sum();
+        assert!(tasks >= 6 && bins.tasks.len() > 1, "{tasks} tasks");
+        let mut stencils = Stencils::default();
+        stencils.compute(shape.as_ref(), &grid, &x);
+        let masses = |threads: usize| -> Vec<f64> {
+            let mut nodes = GridNodes::<2>::default();
+            nodes.ensure(&grid, false, false, false).unwrap();
+            {
+                let out = NodeScatter::new(&mut nodes);
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    bins.run_tasks(
+                        || (),
+                        |range| {
+                            for &p in &bins.order[range] {
+                                let (nodes, weights, _) = stencils.of(p as usize);
+                                for (&n, &w) in nodes.iter().zip(weights) {
+                                    // SAFETY: tasks that share nodes do not run at once
+                                    // (`run_tasks` waits for them); `touch` checks the bound.
+                                    unsafe {
+                                        out.touch(n);
+                                        scatter_add(out.mass, n, w * (1.0 + p as f64));
+                                    }
+                                }
+                            }
+                        },
+                        |(), ()| (),
+                    )
+                });
+            }
+            nodes.mass.clone()
+        };
+        let (one, three) = (masses(1), masses(3));
+        assert!(
+            one.iter()
+                .zip(&three)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "the node sums depend on the thread count"
+        );
+        let mut serial = vec![0.0; one.len()];
+        for p in 0..x.len() {
+            let (nodes, weights, _) = stencils.of(p);
+            for (&n, &w) in nodes.iter().zip(weights) {
+                serial[n] += w * (1.0 + p as f64);
+            }
+        }
+        for (n, (a, b)) in one.iter().zip(&serial).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                "node {n}: {a} against {b}"
+            );
+        }
+        let total: f64 = (0..x.len()).map(|p| 1.0 + p as f64).sum();
+        let summed: f64 = one.iter().sum();
+        assert!(
+            (summed - total).abs() < 1e-9 * total,
+            "{summed} against {total}"
+        );
+    }
+}

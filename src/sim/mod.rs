@@ -166,7 +166,13 @@ pub struct Sim<const D: usize> {
     /// setting of the caller's run, like the fast paths and the body force, so not part of a
     /// checkpoint (a loaded simulation has the default).
     pub(crate) max_steps_per_advance: u64,
+    /// The simulation's own worker threads ([`Sim::set_threads`]); `None`: rayon's global pool.
+    /// A setting of the caller's process, not part of a checkpoint.
+    pub(crate) threads: Option<std::sync::Arc<rayon::ThreadPool>>,
 }
+
+/// The most worker threads [`Sim::set_threads`] starts for one simulation.
+pub const MAX_THREADS: usize = 4096;
 
 impl<const D: usize> Sim<D> {
     /// A simulation on a grid of `cells` cells of size `cell_size` from `origin`, with the default
@@ -199,6 +205,7 @@ impl<const D: usize> Sim<D> {
             fast_paths: FastPaths::default(),
             energy: EnergyLedger::default(),
             max_steps_per_advance: DEFAULT_MAX_STEPS_PER_ADVANCE,
+            threads: None,
         })
     }
 
@@ -214,6 +221,17 @@ impl<const D: usize> Sim<D> {
     }
 
     /// Wall-clock seconds spent in each phase of the steps so far (benchmarks, tuning).
+    ///
+    /// ```
+    /// # use rkmpm::{Material, Sim};
+    /// let mut sim = Sim::<2>::new([0.0, 0.0], [8, 8], 0.125).unwrap();
+    /// let m = sim.add_material(Material::linear_elastic(1000.0, 1e6, 0.3).unwrap());
+    /// sim.add_particles(m, &[[0.5, 0.5].into()], &[1e-3], None).unwrap();
+    /// sim.step(sim.stable_dt(0.3).unwrap()).unwrap();
+    /// let times: rkmpm::PhaseTimes = sim.phase_times();
+    /// let memory: rkmpm::MemoryUse = sim.memory();
+    /// assert!(times.shape >= 0.0 && memory.particles > 0);
+    /// ```
     pub fn phase_times(&self) -> crate::step::PhaseTimes {
         self.work.times
     }
@@ -252,6 +270,53 @@ impl<const D: usize> Sim<D> {
     /// The step's fast paths.
     pub fn fast_paths(&self) -> FastPaths {
         self.fast_paths
+    }
+
+    /// Gives the simulation its own `threads` worker threads (0: one per core the process may
+    /// use, `std::thread::available_parallelism`), on which its steps and its other parallel
+    /// passes run, whatever other simulations or the host's threads do. Until this is called a
+    /// simulation runs on rayon's global pool (`RAYON_NUM_THREADS` threads, or one per core),
+    /// shared by every simulation of the process. Results are the same to the last bit for any
+    /// count. Any time, also between steps; a setting of the caller's process, not saved in a
+    /// checkpoint (a loaded simulation runs on the global pool). Refuses more than
+    /// [`MAX_THREADS`]; a pool the system cannot start (`OutOfMemory`) changes nothing.
+    pub fn set_threads(&mut self, threads: usize) -> Result<()> {
+        if threads > MAX_THREADS {
+            return Err(Error::invalid(format!(
+                "threads must be at most {MAX_THREADS} (0 for one per core), got {threads}"
+            )));
+        }
+        let count = match threads {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(count)
+            .thread_name(|i| format!("rkmpm-{i}"))
+            .build()
+            .map_err(|e| {
+                Error::new(
+                    ErrorKind::OutOfMemory,
+                    format!("cannot start {count} worker threads: {e}"),
+                )
+            })?;
+        self.threads = Some(std::sync::Arc::new(pool));
+        Ok(())
+    }
+
+    /// The number of worker threads the simulation's steps run on ([`Sim::set_threads`], or the
+    /// size of rayon's global pool).
+    pub fn threads(&self) -> usize {
+        self.on_threads(rayon::current_num_threads)
+    }
+
+    /// Runs `work` on the simulation's worker threads: its own pool, or the pool of the caller
+    /// (rayon's global pool outside any).
+    pub(crate) fn on_threads<R: Send>(&self, work: impl FnOnce() -> R + Send) -> R {
+        match &self.threads {
+            Some(pool) => pool.install(work),
+            None => work(),
+        }
     }
 
     /// Bounds the steps one [`Sim::advance`] may take (at least 1; default
@@ -739,13 +804,15 @@ impl<const D: usize> Sim<D> {
     pub(crate) fn signal_speed(&self) -> f64 {
         let (ps, materials) = (&self.particles, &self.materials);
         // In parallel: the maximum is exact, so any thread count gives the same value.
-        (0..ps.len())
-            .into_par_iter()
-            .map(|p| {
-                let j = crate::determinant(&ps.deformation_gradient[p]);
-                materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
-            })
-            .reduce(|| 0.0, f64::max)
+        self.on_threads(|| {
+            (0..ps.len())
+                .into_par_iter()
+                .map(|p| {
+                    let j = crate::determinant(&ps.deformation_gradient[p]);
+                    materials[ps.material[p] as usize].wave_speed(j) + ps.velocity[p].norm()
+                })
+                .reduce(|| 0.0, f64::max)
+        })
     }
 
     pub(crate) fn critical_dt(&self) -> Result<f64> {

@@ -1,5 +1,5 @@
 //! Stepping a simulation: the checks before a step, the body-force callback on the calling
-//! thread, then the step's phases ([`crate::step`]) on rayon's pool.
+//! thread, then the step's phases ([`crate::step`]) on the simulation's worker threads.
 
 use super::Sim;
 use crate::error::{check_positive, Error, ErrorKind, Result};
@@ -54,8 +54,12 @@ impl<const D: usize> Sim<D> {
         // The parallel passes of the step then run on the pool's threads without the calling
         // thread handing each one over and sleeping until it ends (two thread switches per
         // pass, about a dozen passes per step), which shows most on small problems.
+        // On the simulation's own pool when it has one ([`Sim::set_threads`]).
         let plan = self.surface_plan();
-        rayon::scope(|_| self.phases_of_step(plan).run(dt))?;
+        match self.threads.clone() {
+            Some(pool) => pool.scope(|_| self.phases_of_step(plan).run(dt))?,
+            None => rayon::scope(|_| self.phases_of_step(plan).run(dt))?,
+        }
         self.time += dt;
         self.steps += 1;
         Ok(())

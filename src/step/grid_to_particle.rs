@@ -569,3 +569,59 @@ where
         })
         .reduce(|| (0.0, true), |a, b| (a.0.max(b.0), a.1 && b.1))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The new state written from several threads through [`NewStateWriter`], each particle by
+    /// one thread (the threads take particles `k, k + 3, ...`), then read back through it: every
+    /// quantity, the affine matrix and the history slot included, holds what its one writer
+    /// stored. Run under Miri by `scripts/test-miri.sh`, where two threads reaching one
+    /// particle's slots would be a data race.
+    #[test]
+    fn new_states_written_from_several_threads() {
+        let n = 30;
+        let update = |p: usize| ParticleUpdate::<2> {
+            position: Vector::<2>::new(p as f64, 1.0),
+            velocity: Vector::<2>::new(2.0, p as f64),
+            affine: Matrix::from_element(p as f64),
+            deformation_gradient: Matrix::identity() * (1.0 + p as f64),
+            stress: Matrix::from_element(-(p as f64)),
+            pressure: 0.5 * p as f64,
+        };
+        let mut state = NewState::<2> {
+            position: vec![Vector::zeros(); n],
+            velocity: vec![Vector::zeros(); n],
+            affine: vec![Matrix::zeros(); n],
+            deformation_gradient: vec![Matrix::zeros(); n],
+            stress: vec![Matrix::zeros(); n],
+            pressure: vec![0.0; n],
+            history: vec![History::default(); n],
+        };
+        {
+            let writer = state.writer();
+            std::thread::scope(|scope| {
+                for k in 0..3 {
+                    let writer = &writer;
+                    scope.spawn(move || {
+                        for p in (k..n).step_by(3) {
+                            // SAFETY: thread `k` alone handles the particles `k + 3j`.
+                            unsafe {
+                                writer.store(p, &update(p));
+                                if let Some(h) = writer.history(p) {
+                                    h.plastic_strain = p as f64;
+                                }
+                                assert_eq!(writer.get(p), update(p));
+                            }
+                        }
+                    });
+                }
+            });
+        }
+        for p in 0..n {
+            assert_eq!(state.get(p), update(p), "particle {p}");
+            assert_eq!(state.history[p].plastic_strain, p as f64);
+        }
+    }
+}

@@ -1,7 +1,8 @@
 //! One explicit MPM step (METHOD.md section 1), phase by phase, each in the file named after it.
 //! `Sim::step` checks the step and calls the body-force callback on the calling thread, then
-//! runs a `Step` on rayon's pool: `Step::run` computes the shape functions and bins and
-//! calls `run_phases`, whose lines are the phases in order, then commits.
+//! runs a `Step` on the simulation's worker threads: `Step::run` computes the shape functions
+//! and bins and calls `run_phases`, whose lines are the phases in order, then commits. What the
+//! phases share (the workspace, their read-only inputs, the plans) is in `context`.
 //!
 //! 1. shape functions of every particle, once per step: B-splines as 1D factors
 //!    ([`crate::shape::TensorStencils`]), RK and every shape under VC as node lists
@@ -26,21 +27,20 @@
 //!
 //! The new particle state is built in arrays of the workspace ([`NewState`]) and swapped with the
 //! particles' only when every particle passed the checks (finite, `det F > 0`, inside the grid),
-//! so a failed step leaves the last good state. `reference` (tests only) is the same step
-//! written plainly, node by node, and the oracle of the fast one.
+//! so a failed step leaves the last good state. `crate::reference` (tests only) is the same
+//! step written plainly, node by node, and the oracle of the fast one.
 //! [`PhaseTimes`] accumulates the time per phase.
 
 mod checks;
 mod constitutive_update;
 mod contact;
+mod context;
 pub(crate) mod edge_lumping;
 mod grid_to_particle;
 mod grid_update;
 mod musl;
 mod particle_to_grid;
 mod profile;
-#[cfg(test)]
-mod reference;
 mod surface;
 mod vc_corrections;
 mod vc_torque;
@@ -48,6 +48,12 @@ pub(crate) use checks::StepLabel;
 pub(crate) use profile::bytes as profile_bytes;
 pub(crate) use profile::lap;
 pub use profile::{MemoryUse, PhaseTimes};
+#[cfg(test)]
+pub(crate) use surface::found_surface;
+
+use context::clear_grid;
+pub(crate) use context::{surface_age_after, StepInputs, SurfacePlan};
+pub use context::{Reorder, TransferPlan, Workspace};
 
 pub use crate::grid::{Bins, BlockLayout};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
@@ -64,7 +70,7 @@ use crate::error::Result;
 use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
-use crate::options::{FastPaths, Options, Scheme, Shape, Transfer, Walls};
+use crate::options::{FastPaths, Options, Scheme, Shape, Transfer};
 use crate::particles::Particles;
 use crate::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use crate::Vector;
@@ -74,128 +80,8 @@ use rayon::prelude::*;
 pub use surface::BoundaryUpdate;
 use surface::{apply_tractions, move_boundary_points};
 
-/// Scratch space of a step, kept between steps so the hot loops do not allocate.
-#[derive(Debug, Default)]
-pub struct Workspace<const D: usize> {
-    /// Particles binned by grid block (the coloured particle-to-grid map).
-    pub bins: Bins<D>,
-    /// Stored stencils (RK, and every shape under VC).
-    pub stencils: Stencils<D>,
-    /// B-spline stencils as 1D factors (linear hats, quadratic, cubic).
-    pub linear: TensorStencils<D, 2>,
-    pub quadratic: TensorStencils<D, 3>,
-    pub cubic: TensorStencils<D, 4>,
-    /// Buffers of the particles' sort.
-    pub spare: crate::particles::SpareArrays<D>,
-    /// How the step being taken stores its particles in block order (decided with its bins).
-    pub reorder: Reorder,
-    /// Permute every quantity at the commit even under USL (tests compare the two ways).
-    pub reorder_at_commit: bool,
-    /// `max_p (c_p + |v_p|)` of the particles as they are, when the last step computed it with
-    /// their new state (`None` after anything else changed them: `Sim::signal_speed` then takes
-    /// it afresh); and the value of the step being taken, which its commit makes current.
-    pub signal_speed: Option<f64>,
-    pub new_signal_speed: f64,
-    /// Time per phase, summed over the steps.
-    pub times: PhaseTimes,
-    /// Nodes written by the last step.
-    pub active_nodes: usize,
-    pub boundary_stencils: Stencils<D>,
-    /// Current particle volumes (for VC).
-    pub volumes: Vec<f64>,
-    pub boundary_updates: Vec<BoundaryUpdate<D>>,
-    /// What the step's friction walls and contact correction took from the node velocities.
-    pub node_losses: NodeLosses,
-    pub nodes: GridNodes<D>,
-    /// The bodies' node fields under contact; empty otherwise.
-    pub bodies: BodyFields<D>,
-    pub body_acceleration: Vec<Vector<D>>,
-    /// The new particle state, swapped in by the commit.
-    pub new_state: NewState<D>,
-    /// Whether each new particle state passed the checks.
-    pub admissible: Vec<bool>,
-}
-
-/// How a step stores its particles in the order of their grid blocks, once they have scattered
-/// over them (`Bins::is_scattered`).
-#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
-pub enum Reorder {
-    /// Not this step: still sorted enough, or sorting is off.
-    #[default]
-    No,
-    /// Grid to particle writes the new state in block order, and the commit permutes only the
-    /// quantities a step carries unchanged (USL): a fifth of the bytes of a whole permutation.
-    InGather,
-    /// The commit permutes every quantity (MUSL, whose second map reads the new state by the
-    /// particles' old slots).
-    AtCommit,
-}
-
-/// What the transfer needs from the particles and the shape function.
-#[derive(Debug, Clone, Copy)]
-pub struct TransferPlan {
-    /// FLIP weight (0 for pure PIC and for APIC).
-    pub flip: f64,
-    /// APIC is on.
-    pub apic: bool,
-    /// `1 / D_p` when the shape function's APIC inertia is a constant multiple of the identity.
-    pub inverse_inertia: Option<f64>,
-    /// MLS: the force rides on the affine momentum and the velocity gradient is `C_p` (then
-    /// `apic` is on and `inverse_inertia` is given).
-    pub mls: bool,
-}
-
-/// What the phases of one step read and none of them changes.
-pub(crate) struct StepInputs<'a, const D: usize, S> {
-    pub grid: &'a Grid<D>,
-    pub particles: &'a Particles<D>,
-    /// The particles' shape functions this step.
-    pub stencils: &'a S,
-    /// The same as stored lists, when they are (for VC and the lumping of signed shapes).
-    pub stored: Option<&'a Stencils<D>>,
-    /// The particles binned by grid block for the maps to the grid.
-    pub bins: &'a Bins<D>,
-    pub walls: &'a Walls<D>,
-    pub options: &'a Options<D>,
-    pub shape: &'a dyn ShapeFunction<D>,
-    pub materials: &'a [Material],
-    /// Each material's rigid velocity, `None` for a deformable one.
-    pub rigid: &'a [Option<Vector<D>>],
-    /// The body-force callback's accelerations this step, if there is one.
-    pub body_acceleration: Option<&'a [Vector<D>]>,
-    /// The given boundary points.
-    pub boundary: &'a BoundaryPoints<D>,
-    pub fast_paths: FastPaths,
-    pub label: StepLabel,
-    pub plan: TransferPlan,
-    pub surface_plan: SurfacePlan,
-    pub dt: f64,
-}
-
-/// The found surface's age after a step taken with `plan` (`carried`: its points moved): 1
-/// after the step that found it and carried it, one more after each step that carried it,
-/// `u32::MAX` (found anew by the next step) when not carried.
-pub(crate) fn surface_age_after(age: u32, plan: SurfacePlan, carried: bool) -> u32 {
-    match (carried, plan.find) {
-        (true, true) => 1,
-        (true, false) => age.saturating_add(1),
-        (false, _) => u32::MAX,
-    }
-}
-
-/// How a step takes the surface VC finds from the particles (no boundary points given):
-/// found anew from the particles at its start, or the last one as the grid carried it; and
-/// whether the step carries it on to the next (METHOD.md section 3: the found surface).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct SurfacePlan {
-    /// Find the surface from the particles at the start of the step.
-    pub find: bool,
-    /// Move the surface with the grid like given boundary points, for the next step.
-    pub carry: bool,
-}
-
 /// One step of a simulation: what it reads of the simulation and what it changes
-/// (`Sim::step` makes one after its checks and runs it on rayon's pool).
+/// (`Sim::step` makes one after its checks and runs it on the simulation's worker threads).
 pub(crate) struct Step<'a, const D: usize> {
     pub grid: &'a Grid<D>,
     pub shape: &'a dyn ShapeFunction<D>,
@@ -709,23 +595,6 @@ fn grid_to_particle_and_update<const D: usize, S: StencilView<D>>(
     work.new_state = new;
     work.new_signal_speed = speed;
     all_admissible
-}
-
-/// Clears the nodes the last step wrote (all fields zero, none active), of the one field and of
-/// each body's.
-fn clear_grid<const D: usize>(nodes: &mut GridNodes<D>, bodies: &mut [GridNodes<D>]) {
-    nodes.reset();
-    for b in bodies.iter_mut() {
-        b.reset();
-    }
-}
-
-impl<const D: usize> Workspace<D> {
-    /// Clears the nodes the last step wrote (all fields zero, none active), of the one field
-    /// and of each body's; the step does it itself, while it bins.
-    pub fn clear_grid(&mut self) {
-        clear_grid(&mut self.nodes, &mut self.bodies.nodes);
-    }
 }
 
 #[cfg(test)]

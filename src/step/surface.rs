@@ -21,7 +21,7 @@ pub struct BoundaryUpdate<const D: usize> {
 
 /// The surface of the particles as they are now ([`BoundaryPoints::of_particles`]): of all of
 /// them, or under contact of those of material `body` only.
-pub(super) fn found_surface<const D: usize>(
+pub(crate) fn found_surface<const D: usize>(
     grid: &Grid<D>,
     ps: &Particles<D>,
     body: Option<u32>,

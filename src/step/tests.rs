@@ -676,7 +676,7 @@ fn vc_finds_the_surface_of_the_particles_at_every_step() {
 }
 
 /// Results do not depend on the thread count: the same particle data bit for bit with 1 and with
-/// 2 worker threads (P2G runs by colours of rows of grid blocks or of blocks; the other phases
+/// 2 worker threads of the simulation's own pool (`Sim::set_threads`; P2G runs by colours of rows of grid blocks or of blocks; the other phases
 /// are per particle or per node), for B-splines with APIC and MLS and for RK with VC, and by rows
 /// in a tall column, in 2D and 3D.
 #[test]
@@ -688,19 +688,15 @@ fn results_do_not_depend_on_the_thread_count() {
         steps: usize,
         make: impl FnOnce() -> Sim<D> + Send,
     ) -> (Particles<D>, usize) {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            let mut sim = make();
-            sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
-            let dt = sim.stable_dt(0.3).unwrap();
-            for _ in 0..steps {
-                sim.step(dt).unwrap();
-            }
-            (sim.particles.clone(), sim.work.bins.tasks.len())
-        })
+        let mut sim = make();
+        sim.set_threads(threads).unwrap();
+        assert_eq!(sim.threads(), threads);
+        sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..steps {
+            sim.step(dt).unwrap();
+        }
+        (sim.particles.clone(), sim.work.bins.tasks.len())
     }
     fn run<const D: usize>(
         threads: usize,
@@ -746,6 +742,66 @@ fn results_do_not_depend_on_the_thread_count() {
         );
         assert_eq!(one, two, "{shape:?} {transfer:?}");
     }
+}
+
+/// Two simulations, each on its own worker threads (`Sim::set_threads`: 3 and 2), stepped at
+/// once from two host threads, give the particle data each gives stepped alone on one thread,
+/// bit for bit: a 2D block with RK1 + VC1 and a 3D block with the quadratic B-spline.
+#[test]
+fn simulations_on_their_own_threads_step_at_once() {
+    fn run<const D: usize>(threads: usize, shape: Shape, vc: bool) -> Particles<D> {
+        let mut sim = block::<D>(shape, Transfer::Apic);
+        if vc {
+            sim.set_integration(crate::sim::Integration::Vc { order: 1 })
+                .unwrap();
+        }
+        sim.set_threads(threads).unwrap();
+        assert_eq!(sim.threads(), threads);
+        sim.set_gravity(Vector::<D>::from_element(-9.81)).unwrap();
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..10 {
+            sim.step(dt).unwrap();
+        }
+        sim.particles.clone()
+    }
+    let rk1 = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let alone = (run::<2>(1, rk1, true), run::<3>(1, Shape::BSpline2, false));
+    let at_once = std::thread::scope(|s| {
+        let a = s.spawn(|| run::<2>(3, rk1, true));
+        let b = s.spawn(|| run::<3>(2, Shape::BSpline2, false));
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    assert!(
+        alone.0 == at_once.0,
+        "2D RK1 + VC1 on 3 threads beside a 3D run"
+    );
+    assert!(
+        alone.1 == at_once.1,
+        "3D B-spline on 2 threads beside a 2D run"
+    );
+}
+
+/// `Sim::set_threads` takes 0 for one thread per core, refuses more than `MAX_THREADS` with the
+/// count it had kept, and can change the count between steps.
+#[test]
+fn thread_counts_are_checked() {
+    let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+    assert_eq!(sim.threads(), rayon::current_num_threads());
+    sim.set_threads(0).unwrap();
+    let cores = std::thread::available_parallelism().unwrap().get();
+    assert_eq!(sim.threads(), cores);
+    let e = sim.set_threads(crate::MAX_THREADS + 1).unwrap_err();
+    assert_eq!(e.kind, crate::ErrorKind::InvalidArgument);
+    assert!(e.message.contains("at most 4096"), "{}", e.message);
+    assert_eq!(sim.threads(), cores);
+    let dt = sim.stable_dt(0.3).unwrap();
+    sim.step(dt).unwrap();
+    sim.set_threads(2).unwrap();
+    sim.step(dt).unwrap();
+    assert_eq!(sim.threads(), 2);
 }
 
 /// Results do not depend on the instruction set: the particle loops compiled for AVX2 and FMA
@@ -1298,7 +1354,7 @@ fn bins_cover_every_particle_and_colours_write_disjoint_nodes() {
     }
 }
 
-/// A 3D scene of 10 million particles must fit in 16 GiB (issue 7): with the quadratic B-spline
+/// A 3D scene of 10 million particles must fit in 16 GiB: with the quadratic B-spline
 /// and APIC, particles and the step's per-particle storage stay under 1000 B per particle (885
 /// measured with the sort's spare buffers at 10^6), which leaves 6 GiB of 16 for the grid;
 /// 10^7 particles ran at 8.9 GB peak RSS (`BENCHMARKS.md`).

@@ -9,8 +9,8 @@
 //!
 //! `cargo run --release --example granular_collapse -- --methods` (about 14 minutes) runs the
 //! same aspect ratios with the quadratic B-spline and RK1 (ã = 2), each with material-point and
-//! first-order VC integration, and writes `methods.md` and `methods.png` there instead (issue 4:
-//! "use RK + VC and show the difference").
+//! first-order VC integration, and writes `methods.md` and `methods.png` there instead: what RK
+//! and VC change in a collapse.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -22,14 +22,14 @@ use rkmpm_studies::scenes::{log_log_slope, CollapseResult, GranularColumn, NGUYE
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// The aspect ratios of the scene's table: the issue's 0.5–4 in steps of 0.5 (the exponent over
+/// The aspect ratios of the scene's table: 0.5–4 in steps of 0.5 (the exponent over
 /// 1.5–4 is fitted through six points, from the law's lower end a = 1.5 on), and 6 and 8
 /// beyond it.
 const ASPECTS: [f64; 10] = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 6.0, 8.0];
-/// The aspect ratios of the methods' comparison (the issue's range, in steps of 0.5).
+/// The aspect ratios of the methods' comparison (0.5–4, in steps of 0.5).
 const METHOD_ASPECTS: [f64; 8] = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0];
-/// The largest aspect ratio of the issue's range, the upper end of the exponents it targets.
-const ISSUE_MAX_ASPECT: f64 = 4.0;
+/// The upper end of the aspect ratios the exponents are fitted over (from 1.5).
+const FIT_MAX_ASPECT: f64 = 4.0;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let quick = std::env::args().any(|a| a == "--quick");
@@ -131,7 +131,7 @@ fn methods(cells: usize, out: &Path) -> Result<(), Box<dyn std::error::Error>> {
             )?;
             rows.push(r);
         }
-        let (run_exp, h_exp) = exponents_of(&rows, 1.5, ISSUE_MAX_ASPECT);
+        let (run_exp, h_exp) = exponents_of(&rows, 1.5, FIT_MAX_ASPECT);
         writeln!(
             exponents,
             "| {name} | {run_exp:.3} | {:.2} | {h_exp:.3} | {:.2} |",
@@ -213,9 +213,9 @@ fn plot_methods(
         &root,
         "Column collapse by method (lines: measured laws)",
         "(L∞ − L0)/L0 (circles) and H∞/L0 (triangles)",
-        ISSUE_MAX_ASPECT,
+        FIT_MAX_ASPECT,
     )?;
-    let [runout_law, height_law] = law_curves(ISSUE_MAX_ASPECT);
+    let [runout_law, height_law] = law_curves(FIT_MAX_ASPECT);
     chart.draw_series(LineSeries::new(runout_law, BLACK.stroke_width(2)))?;
     chart.draw_series(LineSeries::new(height_law, BLACK.stroke_width(2)))?;
     let colours = [BLUE, CYAN, RED, MAGENTA];
@@ -298,8 +298,8 @@ fn write_tables(
             r.seconds
         )?;
     }
-    let (run_exp, h_exp) = exponents_of(rows, 1.5, ISSUE_MAX_ASPECT);
-    writeln!(md, "\nFitted exponents over 1.5 ≤ a ≤ {ISSUE_MAX_ASPECT} (the issue's range): run-out {run_exp:.3} (law 0.73, ratio {:.2}); final height H∞/L0 {h_exp:.3} (law 1/3, ratio {:.2}).", run_exp / 0.73, h_exp / (1.0 / 3.0))?;
+    let (run_exp, h_exp) = exponents_of(rows, 1.5, FIT_MAX_ASPECT);
+    writeln!(md, "\nFitted exponents over 1.5 ≤ a ≤ {FIT_MAX_ASPECT} (the fitted range): run-out {run_exp:.3} (law 0.73, ratio {:.2}); final height H∞/L0 {h_exp:.3} (law 1/3, ratio {:.2}).", run_exp / 0.73, h_exp / (1.0 / 3.0))?;
     let (run_exp, h_exp) = exponents_of(rows, 3.0, f64::INFINITY);
     writeln!(md, "\nOver a ≥ 3 (to a = {}): run-out {run_exp:.3} (ratio {:.2}); final height {h_exp:.3} (ratio {:.2}).", ASPECTS[ASPECTS.len() - 1], run_exp / 0.73, h_exp / (1.0 / 3.0))?;
     writeln!(md, "\nThe yield function after the return mapping never exceeds round-off: largest f/E at the end over all runs {:.1e}.", rows.iter().map(|r| r.worst_yield).fold(f64::NEG_INFINITY, f64::max))?;

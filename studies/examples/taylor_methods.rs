@@ -1,4 +1,4 @@
-//! The Taylor bar with RK and VC (issue 4: "use RK + VC and show the difference"): Simo's
+//! The Taylor bar with RK and VC, and what they change: Simo's
 //! bilinear copper bar at the given resolutions with the quadratic B-spline, RK1 (cubic B-spline
 //! kernel, ã = 2) and RK1 with first-order VC, all APIC. Writes
 //! `docs/validation/taylor/methods.md`.

@@ -2,6 +2,9 @@
 //! (each binary instantiates the engine's generic step anew in a release build). Run one file's
 //! tests with `cargo test --release -p rkmpm-studies --test studies collapse::`.
 
+mod checkpoint;
 mod collapse;
 mod convergence;
 mod impact;
+mod scene_files;
+mod vibrating_bar;

@@ -943,6 +943,74 @@ fn checkpoint_through_the_c_api() {
     }
 }
 
+/// A simulation's own threads: 0 for one per core, a refused count that changes nothing, two
+/// simulations with their own counts stepped at once from two host threads with the bits of one
+/// stepped alone, and a checkpoint that does not keep the count.
+#[test]
+fn threads_through_the_c_api() {
+    let dir = std::env::temp_dir().join(format!("rkmpm-c-threads-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = std::ffi::CString::new(dir.join("a.rkmpm").to_str().unwrap()).unwrap();
+    unsafe {
+        let threads = |s: *const RkmpmSim| {
+            let mut n = 0u32;
+            assert_eq!(rkmpm_sim_threads(s, &mut n), RKMPM_OK);
+            n
+        };
+        let sim = sim2d(false);
+        assert_eq!(threads(sim), rayon::current_num_threads() as u32);
+        assert_eq!(rkmpm_sim_set_threads(sim, 0), RKMPM_OK);
+        let cores = std::thread::available_parallelism().unwrap().get() as u32;
+        assert_eq!(threads(sim), cores);
+        assert_eq!(
+            rkmpm_sim_set_threads(sim, RKMPM_MAX_THREADS + 1),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let message = last_error();
+        assert!(message.starts_with("rkmpm_sim_set_threads: "), "{message}");
+        assert_eq!(threads(sim), cores);
+        assert_eq!(rkmpm_sim_threads(sim, null_mut()), RKMPM_ERR_NULL_POINTER);
+        assert_eq!(rkmpm_sim_set_threads(sim, 3), RKMPM_OK);
+        assert_eq!(rkmpm_sim_save(sim, path.as_ptr()), RKMPM_OK);
+        let mut copy = null_mut();
+        assert_eq!(rkmpm_sim_load(path.as_ptr(), &mut copy), RKMPM_OK);
+        assert_eq!(threads(copy), rayon::current_num_threads() as u32);
+        rkmpm_sim_free(copy);
+        rkmpm_sim_free(sim);
+    }
+    // The positions after ten steps of a simulation on `n` threads of its own.
+    fn positions(n: u32) -> Vec<f64> {
+        unsafe {
+            let sim = sim2d(false);
+            assert_eq!(rkmpm_sim_set_threads(sim, n), RKMPM_OK);
+            assert_eq!(rkmpm_sim_set_gravity(sim, [0.0, -9.81].as_ptr()), RKMPM_OK);
+            let mut dt = 0.0;
+            assert_eq!(rkmpm_sim_stable_dt(sim, 0.3, &mut dt), RKMPM_OK);
+            for _ in 0..10 {
+                assert_eq!(rkmpm_sim_step(sim, dt), RKMPM_OK);
+            }
+            let mut out = vec![0.0; 2 * rkmpm_sim_particle_count(sim)];
+            assert_eq!(
+                rkmpm_sim_get_particles(sim, RKMPM_FIELD_POSITION, out.as_mut_ptr(), out.len()),
+                RKMPM_OK
+            );
+            rkmpm_sim_free(sim);
+            out
+        }
+    }
+    let alone = positions(1);
+    let (a, b) = std::thread::scope(|s| {
+        let a = s.spawn(|| positions(2));
+        let b = s.spawn(|| positions(3));
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    assert!(
+        alone == a && alone == b,
+        "the thread count changed the positions"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// The found surface's refresh interval: the default, a refused zero that changes nothing, and
 /// a checkpoint that keeps it.
 #[test]

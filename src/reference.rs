@@ -1,6 +1,7 @@
 //! The reference step: the method of METHOD.md section 1 written plainly, serial and node by node,
 //! with none of the fast step's machinery (no bins, colours, factored stencils, lanes, SIMD or
-//! stored stencils). It is the oracle the fast step is tested against (`tests.rs`,
+//! stored stencils), outside the step's module, of which it uses only the found surface and its
+//! age. It is the oracle the fast step is tested against (`tests` below,
 //! `fast_step_matches_the_reference_step`): both must give the same particle state to round-off.
 //!
 //! It covers what the fast step does with one velocity field, or one per body under contact
@@ -154,7 +155,7 @@ fn vc_nodes<'a, const D: usize>(
     let surface = match (sim.boundary.is_empty(), carried) {
         (false, _) => sim.boundary.clone(),
         (true, true) => sim.surface.clone(),
-        (true, false) => super::surface::found_surface(&sim.grid, ps, body)?,
+        (true, false) => crate::step::found_surface(&sim.grid, ps, body)?,
     };
     let members: Vec<usize> = (0..ps.len())
         .filter(|&p| body.is_none_or(|b| ps.material[p] == b))
@@ -969,11 +970,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
     let plan = sim.surface_plan();
     let own = sim.vc.is_some() && sim.boundary.is_empty() && sim.options.contact.is_none();
     let found_surface = match own && plan.find {
-        true => Some(super::surface::found_surface(
-            &sim.grid,
-            &sim.particles,
-            None,
-        )?),
+        true => Some(crate::step::found_surface(&sim.grid, &sim.particles, None)?),
         false => None,
     };
     let mut acceleration = vec![Vector::<D>::zeros(); sim.particles.len()];
@@ -1195,7 +1192,7 @@ pub(crate) fn reference_step<const D: usize>(sim: &mut Sim<D>, dt: f64) -> crate
     sim.particles = new;
     sim.boundary = boundary;
     sim.surface = surface;
-    sim.surface_age = super::surface_age_after(sim.surface_age, plan, carried);
+    sim.surface_age = crate::step::surface_age_after(sim.surface_age, plan, carried);
     sim.time += dt;
     sim.steps += 1;
     Ok(())
@@ -1576,8 +1573,7 @@ mod tests {
                     );
                 }
                 if refresh == 1 {
-                    let found =
-                        crate::step::surface::found_surface(&fast.grid, &before, None).unwrap();
+                    let found = crate::step::found_surface(&fast.grid, &before, None).unwrap();
                     assert_eq!(fast.vc_surface(), &found, "step {step}");
                 }
             }
