@@ -57,8 +57,8 @@ impl<const D: usize> Sim<D> {
         // On the simulation's own pool when it has one ([`Sim::set_threads`]).
         let plan = self.surface_plan();
         match self.threads.clone() {
-            Some(pool) => pool.scope(|_| self.phases_of_step(plan).run(dt))?,
-            None => rayon::scope(|_| self.phases_of_step(plan).run(dt))?,
+            Some(pool) => pool.scope(|_| self.step_of(plan).run(dt))?,
+            None => rayon::scope(|_| self.step_of(plan).run(dt))?,
         }
         self.time += dt;
         self.steps += 1;
@@ -85,7 +85,7 @@ impl<const D: usize> Sim<D> {
     }
 
     /// The step's view of the simulation: what it reads and what it changes.
-    fn phases_of_step(&mut self, surface_plan: SurfacePlan) -> Step<'_, D> {
+    fn step_of(&mut self, surface_plan: SurfacePlan) -> Step<'_, D> {
         Step {
             grid: &self.grid,
             shape: self.shape.as_ref(),

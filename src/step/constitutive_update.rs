@@ -4,6 +4,8 @@
 //! checks of its new state (finite, `det F > 0`, inside the grid).
 
 use super::grid_to_particle::{Chunk, Finish, NewState, ParticleUpdate, CHUNK};
+use super::profile::lap;
+use super::{StepInputs, Workspace};
 use crate::grid::DomainBox;
 use crate::material::{block, embed3, pressure, Constitutive, History, Material};
 use crate::options::Walls;
@@ -104,6 +106,39 @@ impl<const D: usize> Finish<D> for ConstitutiveUpdate<'_, D> {
             *speed = self.complete(u, j[k], || wave_speed[k]);
         }
         true
+    }
+}
+
+impl<'a, const D: usize> ConstitutiveUpdate<'a, D> {
+    /// The update of the step's particles: elastic models from `F`, history models by return
+    /// mapping from their state and the increment `ΔF = F^{n+1} (F^n)⁻¹`; particles kept
+    /// inside the walls; the checks.
+    pub(super) fn of<S>(inputs: &StepInputs<'a, D, S>) -> Self {
+        ConstitutiveUpdate {
+            domain: inputs.grid.domain(),
+            particles: inputs.particles,
+            materials: inputs.materials,
+            walls: inputs.walls,
+            any_wall: inputs.walls.any_wall(),
+            dt: inputs.dt,
+        }
+    }
+
+    /// Phase 6: under MUSL the update of every particle's new state after the second map
+    /// (under USL grid to particle ran it in its pass, `gathered` is its result). Leaves the
+    /// signal speed in `work.new_signal_speed`; returns whether every particle passed its checks.
+    pub(super) fn phase(&self, usl: bool, gathered: (f64, bool), work: &mut Workspace<D>) -> bool {
+        let mut clock = std::time::Instant::now();
+        let (speed, all_admissible) = match usl {
+            true => gathered,
+            false => {
+                let result = self.run_all(&mut work.new_state, &mut work.admissible);
+                work.times.constitutive += lap(&mut clock);
+                result
+            }
+        };
+        work.new_signal_speed = speed;
+        all_admissible
     }
 }
 

@@ -1,7 +1,8 @@
-//! Contact (METHOD.md section 6): one node field per body. Each body maps to its own field and
-//! gets its own grid update (a deformable body under VC its own surface and correction; a
-//! rigid body's nodes take its velocity); then the nodes that more than one body touched get
-//! the contact correction ([`crate::contact::correct_velocities`]).
+//! Contact (METHOD.md section 6): one node field per body, phase by phase. Under VC each
+//! deformable body gets its own surface and correction (phase 2); each body maps to its own field
+//! (phase 3) and gets its own grid update, a rigid body's nodes its velocity; then the nodes that
+//! more than one body touched get the contact correction (phase 4,
+//! [`crate::contact::correct_velocities`]).
 
 use super::profile::lap;
 use super::{grid_update, particle_to_grid, Forces, PhaseTimes, StepInputs, ToGrid};
@@ -22,101 +23,94 @@ pub struct BodyFields<const D: usize> {
     pub vc: Vec<VcCorrection<D>>,
     /// Nodes touched by more than one body this step.
     pub shared: Vec<usize>,
+    /// Each body's mass floor this step (particle to grid gives it to the grid update).
+    pub mass_floor: Vec<f64>,
 }
 
-/// What the per-body maps read besides the step's inputs.
-pub(super) struct BodyInputs<'a, const D: usize> {
-    pub contact: Contact,
-    /// The forces of the one-field map (each body's VC correction replaces `vc`).
-    pub forces: Forces<'a, D>,
-    /// The particles' current volumes, for VC.
-    pub volumes: &'a [f64],
-    /// Nodes at or below this fraction of the largest particle mass get no velocity.
-    pub mass_floor_fraction: f64,
-}
-
-/// Particle to grid, grid update and the contact correction, body by body. Returns the mass
-/// floor of the grid updates and, under VC, the bodies' surfaces together (what
-/// `Sim::vc_surface` shows).
-pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
+/// Phase 2 under contact with VC: each deformable body's surface, found from its particles,
+/// and its own correction (`volumes`: the particles' current volumes). Returns the bodies'
+/// surfaces, one set of points.
+pub(super) fn vc_per_body<const D: usize, S: StencilView<D>>(
     inputs: &StepInputs<'_, D, S>,
-    body_inputs: &BodyInputs<'_, D>,
+    volumes: &[f64],
     bodies: &mut BodyFields<D>,
     boundary_stencils: &mut Stencils<D>,
     times: &mut PhaseTimes,
-    losses: &mut NodeLosses,
-) -> Result<(f64, BoundaryPoints<D>)> {
-    let StepInputs {
-        grid,
-        particles: ps,
-        stencils,
-        stored,
-        bins,
-        walls,
-        shape,
-        rigid,
-        plan,
-        dt,
-        ..
-    } = *inputs;
-    let BodyInputs {
-        contact,
-        forces,
-        volumes,
-        mass_floor_fraction,
-    } = *body_inputs;
+) -> Result<BoundaryPoints<D>> {
+    let (grid, ps, rigid) = (inputs.grid, inputs.particles, inputs.rigid);
+    let mut clock = std::time::Instant::now();
+    let mut surfaces = BoundaryPoints::default();
+    for (b, nodes) in bodies.nodes.iter_mut().enumerate() {
+        let Some(vc) = bodies.vc.get_mut(b).filter(|_| rigid[b].is_none()) else {
+            continue;
+        };
+        let surface = super::surface::found_surface(grid, ps, Some(b as u32))?;
+        times.surface += lap(&mut clock);
+        boundary_stencils.compute(inputs.shape, grid, &surface.position);
+        let vc_inputs = VcInputs {
+            grid,
+            bins: inputs.bins,
+            positions: &ps.position,
+            volumes,
+            stencils: inputs.stored.expect("VC runs with stored stencils"),
+            boundary: &surface,
+            boundary_stencils,
+            body: Some((&ps.material, b as u32)),
+        };
+        vc.compute(vc_inputs, nodes);
+        surfaces.add(&surface.position, &surface.area_normal, None)?;
+        times.forces_and_vc += lap(&mut clock);
+    }
+    Ok(surfaces)
+}
+
+/// Phase 3 under contact: each body's particles to its own field (with its VC correction, and
+/// VC's torque removed body by body). Each body's mass floor, `mass_floor_fraction` of its
+/// largest particle mass, goes to `bodies.mass_floor`; returns the last body's.
+pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    forces: Forces<'_, D>,
+    mass_floor_fraction: f64,
+    bodies: &mut BodyFields<D>,
+) -> f64 {
+    let (grid, ps, plan, rigid) = (inputs.grid, inputs.particles, inputs.plan, inputs.rigid);
     let (v, c) = (&ps.velocity[..], &ps.affine[..]);
     let velocity = move |p: usize| v[p];
     let affine = plan.apic.then_some(move |p: usize| c[p]);
-    let mut clock = std::time::Instant::now();
-    let mut mass_floor = 0.0;
-    let mut surfaces = BoundaryPoints::default();
+    bodies.mass_floor.clear();
     for (b, nodes) in bodies.nodes.iter_mut().enumerate() {
-        // VC of a deformable body: its surface and its correction on its own field.
-        let vc = match bodies.vc.get_mut(b).filter(|_| rigid[b].is_none()) {
-            Some(vc) => {
-                let surface = super::surface::found_surface(grid, ps, Some(b as u32))?;
-                times.surface += lap(&mut clock);
-                boundary_stencils.compute(shape, grid, &surface.position);
-                let vc_inputs = VcInputs {
-                    grid,
-                    bins,
-                    positions: &ps.position,
-                    volumes,
-                    stencils: stored.expect("VC runs with stored stencils"),
-                    boundary: &surface,
-                    boundary_stencils,
-                    body: Some((&ps.material, b as u32)),
-                };
-                vc.compute(vc_inputs, nodes);
-                surfaces.add(&surface.position, &surface.area_normal, None)?;
-                times.forces_and_vc += lap(&mut clock);
-                Some(&*vc)
-            }
-            None => None,
-        };
-        let to = ToGrid {
-            grid,
-            particles: ps,
-            bins,
-            stencils,
-            shape: stored,
-        };
+        let vc = bodies.vc.get(b).filter(|_| rigid[b].is_none());
         let largest_mass = particle_to_grid(
-            &to,
+            &ToGrid::of(inputs),
             velocity,
             affine,
             Some(Forces { vc, ..forces }),
             Some(b as u32),
             nodes,
         );
-        mass_floor = mass_floor_fraction * largest_mass;
-        if let (Some(vc), Some(stored)) = (vc, stored) {
+        bodies.mass_floor.push(mass_floor_fraction * largest_mass);
+        if let (Some(vc), Some(stored)) = (vc, inputs.stored) {
             let material = &ps.material;
             let in_body = |p: usize| material[p] == b as u32;
             let (found, n) = (vc.bodies(), ps.len());
+            let walls = inputs.walls;
             super::vc_torque::remove_vc_torque(grid, walls, stored, n, in_body, found, nodes);
         }
+    }
+    bodies.mass_floor.last().copied().unwrap_or(0.0)
+}
+
+/// Phase 4 under contact: each body's grid update with the walls (a rigid body's nodes take
+/// its velocity), then the contact correction on the nodes more than one body touched. Returns
+/// what the deformable bodies' friction walls and the correction took.
+pub(super) fn grid_update_per_body<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    contact: Contact,
+    bodies: &mut BodyFields<D>,
+) -> NodeLosses {
+    let (grid, walls, rigid, dt) = (inputs.grid, inputs.walls, inputs.rigid, inputs.dt);
+    let mut losses = NodeLosses::default();
+    for ((b, nodes), &mass_floor) in bodies.nodes.iter_mut().enumerate().zip(&bodies.mass_floor) {
         let friction = grid_update(grid, walls, nodes, Some(dt), mass_floor, false);
         if rigid[b].is_none() {
             losses.friction += friction;
@@ -129,10 +123,6 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
         }
     }
     find_shared_nodes(&bodies.nodes, &mut bodies.shared);
-    // The work of the correction's impulses on the deformable bodies' velocities after it,
-    // `Σ m (v − v*)·v*` at the shared nodes (in node order): their normal parts cancel (every
-    // body leaves a node with the same normal velocity, and the impulses balance), so what is
-    // counted is friction on the slip, and a rigid body's push (negative: its work).
     let before: Vec<Vec<Vector<D>>> = bodies
         .nodes
         .iter()
@@ -155,7 +145,7 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
         }
     }
     losses.contact = taken;
-    Ok((mass_floor, surfaces))
+    losses
 }
 
 /// The nodes that more than one of `bodies` touched, each once: those of the first body that a

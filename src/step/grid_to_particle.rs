@@ -1,10 +1,15 @@
 //! Grid to particle: velocity (PIC/FLIP blend or APIC), position, velocity gradient and `F`.
 
-use super::TransferPlan;
+use super::constitutive_update::ConstitutiveUpdate;
+use super::profile::lap;
+use super::surface::move_boundary_points;
+use super::{Reorder, StepInputs, TransferPlan, Workspace};
 use crate::cpu::Lanes;
 use crate::error::ErrorKind;
 use crate::grid::{DomainBox, Grid, GridNodes, SharedSlice};
+use crate::integration::BoundaryPoints;
 use crate::material::History;
+use crate::options::Scheme;
 use crate::particles::Particles;
 use crate::shape::StencilView;
 use crate::{Matrix, Vector};
@@ -35,6 +40,65 @@ impl<const D: usize> Default for ParticleUpdate<D> {
             pressure: 0.0,
         }
     }
+}
+
+/// Phase 5: the grid's velocities to the particles' new state (`work.new_state`), in block
+/// order when the particles have `scattered` (USL); under USL with each particle's constitutive
+/// `update` in the same pass, while it is in cache; under MUSL the new momenta are mapped to the
+/// grid again (nodes at or below `mass_floor` skipped) and `F` taken from those velocities. The
+/// `moving` boundary points move with the grid. Returns the signal speed and whether every
+/// particle passed its checks (under USL; under MUSL the constitutive update's phase says).
+pub(super) fn phase<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    update: &ConstitutiveUpdate<'_, D>,
+    moving: Option<&BoundaryPoints<D>>,
+    scattered: bool,
+    mass_floor: f64,
+    work: &mut Workspace<D>,
+) -> (f64, bool) {
+    let (grid, ps, dt) = (inputs.grid, inputs.particles, inputs.dt);
+    let mut clock = std::time::Instant::now();
+    let mut admissible = std::mem::take(&mut work.admissible);
+    let mut new = std::mem::take(&mut work.new_state);
+    let usl = inputs.options.scheme == Scheme::Usl;
+    work.reorder = match scattered {
+        false => Reorder::No,
+        true if usl && !work.reorder_at_commit => Reorder::InGather,
+        true => Reorder::AtCommit,
+    };
+    let source = (work.reorder == Reorder::InGather).then_some(&inputs.bins.order[..]);
+    let fields = match inputs.options.contact {
+        Some(_) => Fields::PerBody(&work.bodies.nodes, &ps.material),
+        None => Fields::One(&work.nodes),
+    };
+    let from = FromGrid {
+        grid,
+        particles: ps,
+        stencils: inputs.stencils,
+        fields,
+        rigid: inputs.rigid,
+        plan: inputs.plan,
+        dt,
+    };
+    let gathered = grid_to_particle(
+        &from,
+        usl.then_some(update),
+        source,
+        &mut new,
+        &mut admissible,
+    );
+    if !usl {
+        super::musl::second_map(inputs, mass_floor, &mut work.nodes, &mut new);
+    }
+    work.boundary_updates.clear();
+    if let Some(boundary) = moving {
+        let bs = &work.boundary_stencils;
+        move_boundary_points(boundary, bs, &work.nodes, dt, &mut work.boundary_updates);
+    }
+    work.admissible = admissible;
+    work.new_state = new;
+    work.times.grid_to_particle += lap(&mut clock);
+    gathered
 }
 
 /// The new particle state of a step, stored as the particles are (one `Vec` per quantity), and

@@ -1,10 +1,49 @@
 //! Grid update: `v_I = ((mv)_I + Δt f_I) / m_I` with the wall conditions.
 
+use super::profile::lap;
+use super::{StepInputs, Workspace};
+use crate::energy::NodeLosses;
 use crate::grid::{Grid, GridNodes, SharedSlice};
+use crate::integration::BoundaryPoints;
 use crate::options::Walls;
+use crate::shape::StencilView;
 use crate::{Matrix, Vector};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
+
+/// Phase 4: the node velocities with the wall conditions, nodes at or below `mass_floor`
+/// skipped: of the one field (without the force under MLS, which carries it in the momentum,
+/// unless `boundary` has tractions), or under contact of each body's field and then the contact
+/// correction. Keeps what friction and contact took in `work.node_losses`.
+pub(super) fn phase<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    mass_floor: f64,
+    boundary: &BoundaryPoints<D>,
+    work: &mut Workspace<D>,
+) {
+    let mut clock = std::time::Instant::now();
+    work.node_losses = match inputs.options.contact {
+        Some(contact) => super::contact::grid_update_per_body(inputs, contact, &mut work.bodies),
+        None => {
+            let (plan, dt) = (inputs.plan, inputs.dt);
+            let mls = plan.mls && plan.inverse_inertia.is_some();
+            let no_force = mls && !boundary.has_tractions();
+            let friction = grid_update(
+                inputs.grid,
+                inputs.walls,
+                &mut work.nodes,
+                Some(dt),
+                mass_floor,
+                no_force,
+            );
+            NodeLosses {
+                friction,
+                contact: 0.0,
+            }
+        }
+    };
+    work.times.grid_update += lap(&mut clock);
+}
 
 /// Signed shape functions: the smallest node mass, as a fraction of the largest node mass, that
 /// a node's internal force is divided by. Nodes that barely overlap a body have a tiny lumped

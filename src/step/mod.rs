@@ -12,18 +12,19 @@
 //!    signed shapes blend their transfer weights at a body's edge (`edge_lumping`);
 //! 2. body forces (the callback, once per step with whole arrays); the boundary points and the
 //!    VC corrections (`vc_corrections`), over the given boundary points or the surface found
-//!    from the particles (`surface`);
+//!    from the particles (`surface`), under contact each body's (`contact`);
 //! 3. [`particle_to_grid`]: mass, momentum (APIC term only under APIC), force; tractions
-//!    (`surface`);
+//!    (`surface`); under contact one field per body (`contact`);
 //! 4. [`grid_update`]: velocities, wall conditions; under contact one field per body, then the
 //!    contact correction (`contact`);
 //! 5. [`grid_to_particle`]: velocity (PIC/FLIP or APIC), position, velocity gradient, `F`;
-//!    under USL each particle's constitutive update (`constitutive_update`) follows in the same
-//!    pass, while it is in cache; under MUSL the new particle momenta are mapped to the grid
-//!    again first (`musl`) and the constitutive update runs after; boundary points move with
-//!    the grid (`surface`);
-//! 6. the checks (`checks`), the commit, and the grid reset where it was written (while the
-//!    next step bins).
+//!    under MUSL the new particle momenta are mapped to the grid again (`musl`) and `F` taken
+//!    from those velocities; boundary points move with the grid (`surface`);
+//! 6. the constitutive update (`constitutive_update`): under USL inside grid to particle's pass,
+//!    each particle while it is in cache; under MUSL after the second map;
+//!
+//! then the checks (`checks`), the commit, and the grid reset where it was written (while the
+//! next step bins).
 //!
 //! The new particle state is built in arrays of the workspace ([`NewState`]) and swapped with the
 //! particles' only when every particle passed the checks (finite, `det F > 0`, inside the grid),
@@ -55,7 +56,9 @@ use context::clear_grid;
 pub(crate) use context::{surface_age_after, StepInputs, SurfacePlan};
 pub use context::{Reorder, TransferPlan, Workspace};
 
-pub use crate::grid::{Bins, BlockLayout};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
+pub use crate::grid::Bins;
+pub use crate::grid::BlockLayout;
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use grid_to_particle::{
     grid_to_particle, mls_velocity_gradient, velocity_gradient, Fields, Finish, FromGrid, NewState,
@@ -65,12 +68,12 @@ pub use grid_update::grid_update;
 pub use particle_to_grid::{particle_to_grid, Forces, ToGrid};
 
 use crate::cpu::Lanes;
-use crate::energy::{traction_work, EnergyLedger, NodeLosses, StepStates};
+use crate::energy::{traction_work, EnergyLedger, StepStates};
 use crate::error::Result;
 use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
-use crate::options::{FastPaths, Options, Scheme, Shape, Transfer};
+use crate::options::{FastPaths, Options, Scheme, Transfer};
 use crate::particles::Particles;
 use crate::shape::{BSpline, BSplineOrder, ShapeFunction, StencilView, Stencils, TensorStencils};
 use crate::Vector;
@@ -78,7 +81,6 @@ use constitutive_update::ConstitutiveUpdate;
 pub use contact::BodyFields;
 use rayon::prelude::*;
 pub use surface::BoundaryUpdate;
-use surface::{apply_tractions, move_boundary_points};
 
 /// One step of a simulation: what it reads of the simulation and what it changes
 /// (`Sim::step` makes one after its checks and runs it on the simulation's worker threads).
@@ -108,13 +110,31 @@ pub(crate) struct Step<'a, const D: usize> {
 }
 
 impl<const D: usize> Step<'_, D> {
-    /// Runs the phases and, when every check passed, commits the new state; a rejected step
-    /// changes nothing of the simulation but its scratch space.
+    /// One step, METHOD.md section 1: the shape functions (phase 1), the phases after them in
+    /// order ([`Step::run_phases`]) and, when every check passed, the commit of the new state;
+    /// a rejected step changes nothing of the simulation but its scratch space.
     pub(crate) fn run(mut self, dt: f64) -> Result<()> {
         // A surface VC finds from the particles this step replaces the last one, which a
         // rejected step restores (a carried one changes only in the commit).
         let last_surface = self.surface_plan.find.then(|| std::mem::take(self.surface));
-        let result = self.compute_step(dt);
+        // 1. Shape functions of every particle; then phases 2–6, compiled for the stencils'
+        //    own storage.
+        let result = self.shape_functions().and_then(|shapes| {
+            let result = match &shapes {
+                ShapeFunctions::Linear(s, stored) => {
+                    self.run_phases(dt, &s.local(), stored.as_ref())
+                }
+                ShapeFunctions::Quadratic(s, stored) => {
+                    self.run_phases(dt, &s.local(), stored.as_ref())
+                }
+                ShapeFunctions::Cubic(s, stored) => {
+                    self.run_phases(dt, &s.local(), stored.as_ref())
+                }
+                ShapeFunctions::Lists(s) => self.run_phases(dt, s, Some(s)),
+            };
+            shapes.put_back(self.work);
+            result
+        });
         if let (Err(_), Some(last)) = (&result, last_surface) {
             *self.surface = last;
         }
@@ -126,28 +146,89 @@ impl<const D: usize> Step<'_, D> {
         Ok(())
     }
 
-    fn transfer_plan(&self) -> TransferPlan {
-        match self.options.transfer {
-            Transfer::PicFlip { flip } => TransferPlan {
-                flip,
-                apic: false,
-                inverse_inertia: None,
-                mls: false,
-            },
-            Transfer::Apic | Transfer::Mls => TransferPlan {
-                flip: 0.0,
-                apic: true,
-                inverse_inertia: self
-                    .shape
-                    .apic_inertia(self.grid.cell_size)
-                    .map(|d| 1.0 / d),
-                mls: self.options.transfer == Transfer::Mls,
-            },
-        }
+    /// The phases of METHOD.md section 1 after the shape functions, in order, with the
+    /// particles' `stencils` (`stored`: the same as stored lists, when they are). The new
+    /// particle state is left in `work.new_state` when every check passed.
+    fn run_phases<S: StencilView<D>>(
+        &mut self,
+        dt: f64,
+        stencils: &S,
+        stored: Option<&Stencils<D>>,
+    ) -> Result<()> {
+        let plan = self.transfer_plan();
+        let rigid: Vec<Option<Vector<D>>> =
+            self.materials.iter().map(|m| m.rigid_velocity()).collect();
+        let work = &mut *self.work;
+        // Every phase reads the bins and the body accelerations: out of the workspace meanwhile.
+        let bins = std::mem::take(&mut work.bins);
+        let body_acceleration = std::mem::take(&mut work.body_acceleration);
+        let inputs = StepInputs {
+            grid: self.grid,
+            particles: &*self.particles,
+            stencils,
+            stored,
+            bins: &bins,
+            walls: &self.options.walls,
+            options: self.options,
+            shape: self.shape,
+            materials: self.materials,
+            rigid: &rigid,
+            body_acceleration: self.body_force.then_some(&body_acceleration[..]),
+            boundary: &*self.boundary,
+            fast_paths: self.fast_paths,
+            label: self.label,
+            plan,
+            surface_plan: self.surface_plan,
+            dt,
+        };
+        let (vc, surface) = (&mut *self.vc, &mut *self.surface);
+        let result = (|| {
+            let mut clock = std::time::Instant::now();
+            // Whether to store the particles in block order this step (with the bins' time).
+            let lanes = inputs.stencils.lanes();
+            let scattered = inputs.fast_paths.particle_sorting && inputs.bins.is_scattered(lanes);
+            work.times.bins += lap(&mut clock);
+            // 2. Forces that do not come from stress (gravity and the body force, whose
+            //    callback ran before the pool took over, go with particle to grid); the
+            //    boundary points and the VC corrections, per body under contact.
+            let (found, body_surfaces) =
+                vc_corrections::boundary_and_corrections(&inputs, vc, surface, work)?;
+            let boundary = if found { &*surface } else { inputs.boundary };
+            let vc = vc.as_ref();
+            // 3. Particle to grid: one field, or one per body under contact.
+            let mass_floor = particle_to_grid::phase(&inputs, vc, boundary, work);
+            // 4. Grid update with the walls; under contact per body, then the contact correction.
+            grid_update::phase(&inputs, mass_floor, boundary, work);
+            // 5. Grid to particle (under MUSL the second map); boundary points move with the grid.
+            let update = ConstitutiveUpdate::of(&inputs);
+            let moving =
+                (vc.is_some() || boundary.has_tractions()) && (!found || inputs.surface_plan.carry);
+            let moving = moving.then_some(boundary);
+            let gathered =
+                grid_to_particle::phase(&inputs, &update, moving, scattered, mass_floor, work);
+            // 6. Constitutive update: under USL inside grid to particle's pass, under MUSL now.
+            let usl = inputs.options.scheme == Scheme::Usl;
+            let all_admissible = update.phase(usl, gathered, work);
+            // The checks: every particle, every boundary point.
+            clock = std::time::Instant::now();
+            checks::check_new_state(&inputs, all_admissible, work)?;
+            if found && inputs.options.contact.is_some() {
+                *surface = body_surfaces;
+            }
+            work.times.checks += lap(&mut clock);
+            Ok(())
+        })();
+        work.bins = bins;
+        work.body_acceleration = body_acceleration;
+        result
     }
 
-    /// Runs the phases and returns the checked new particle state (in the workspace).
-    fn compute_step(&mut self, dt: f64) -> Result<()> {
+    /// Phase 1: every particle's shape functions, once per step: B-splines (and RK1 with
+    /// ã = 2) as 1D factors, with VC beside them as the stored lists its sums read; other
+    /// shapes as stored lists, the transfer weights of signed shapes blended at a body's edge.
+    /// The particles are binned by grid block meanwhile, and the nodes the last step wrote are
+    /// cleared.
+    fn shape_functions(&mut self) -> Result<ShapeFunctions<D>> {
         let grid = &self.grid;
         let work = &mut self.work;
         let signed = self.shape.is_signed();
@@ -163,14 +244,20 @@ impl<const D: usize> Step<'_, D> {
                 b.ensure(grid, signed, true, signed || self.vc.is_some())?;
             }
         }
-        // 1. Shape functions, once per particle: B-splines (and RK1 with ã = 2) as 1D factors,
-        //    with VC beside the stored lists its sums read. The nodes the last step wrote are
-        //    cleared meanwhile.
         let order = (self.shape.tensor_order()).filter(|_| self.fast_paths.factored_stencils);
-        match order {
-            Some(BSplineOrder::Linear) => self.tensor_phases(dt, |w| &mut w.linear),
-            Some(BSplineOrder::Quadratic) => self.tensor_phases(dt, |w| &mut w.quadratic),
-            Some(BSplineOrder::Cubic) => self.tensor_phases(dt, |w| &mut w.cubic),
+        Ok(match order {
+            Some(BSplineOrder::Linear) => {
+                let (s, stored) = self.tensor_stencils(|w| &mut w.linear);
+                ShapeFunctions::Linear(s, stored)
+            }
+            Some(BSplineOrder::Quadratic) => {
+                let (s, stored) = self.tensor_stencils(|w| &mut w.quadratic);
+                ShapeFunctions::Quadratic(s, stored)
+            }
+            Some(BSplineOrder::Cubic) => {
+                let (s, stored) = self.tensor_stencils(|w| &mut w.cubic);
+                ShapeFunctions::Cubic(s, stored)
+            }
             None => {
                 let mut clock = std::time::Instant::now();
                 self.work.clear_grid();
@@ -188,40 +275,17 @@ impl<const D: usize> Step<'_, D> {
                     self.blend_transfer_weights(&mut stencils);
                 }
                 self.work.times.shape += lap(&mut clock);
-                let result = self.phases(dt, &stencils, Some(&stencils));
-                self.work.stencils = stencils;
-                result
+                ShapeFunctions::Lists(stencils)
             }
-        }
+        })
     }
 
-    /// Signed shape functions: the stencils' transfer weights ([`edge_lumping`]), per body
-    /// under contact.
-    fn blend_transfer_weights(&mut self, stencils: &mut Stencils<D>) {
-        let (grid, walls, ps) = (&self.grid, &self.options.walls, &self.particles);
-        let work = &mut self.work;
-        if self.options.contact.is_some() {
-            for (b, nodes) in work.bodies.nodes.iter_mut().enumerate() {
-                edge_lumping::blend_transfer_weights(
-                    grid,
-                    walls,
-                    ps,
-                    Some(b as u32),
-                    stencils,
-                    nodes,
-                );
-            }
-        } else {
-            edge_lumping::blend_transfer_weights(grid, walls, ps, None, stencils, &mut work.nodes);
-        }
-    }
-
-    /// The phases with B-spline stencils stored as factors (`W` nodes per axis).
-    fn tensor_phases<const W: usize>(
+    /// B-spline stencils as factors (`W` nodes per axis, taken from the workspace's `storage`),
+    /// with VC the same as stored lists.
+    fn tensor_stencils<const W: usize>(
         &mut self,
-        dt: f64,
         storage: impl Fn(&mut Workspace<D>) -> &mut TensorStencils<D, W>,
-    ) -> Result<()> {
+    ) -> (TensorStencils<D, W>, Option<Stencils<D>>) {
         let order = match W {
             2 => BSplineOrder::Linear,
             3 => BSplineOrder::Quadratic,
@@ -262,52 +326,48 @@ impl<const D: usize> Step<'_, D> {
             stored.fill_from_factors(&stencils);
             self.work.times.shape += lap(&mut clock);
         }
-        let result = self.phases(dt, &stencils.local(), stored.as_ref());
-        *storage(self.work) = stencils;
-        if let Some(stored) = stored {
-            self.work.stencils = stored;
-        }
-        result
+        (stencils, stored)
     }
 
-    /// The phases after the shape functions, with the particles' stencils (`stored`: the same
-    /// as stored lists, when they are).
-    fn phases<S: StencilView<D>>(
-        &mut self,
-        dt: f64,
-        stencils: &S,
-        stored: Option<&Stencils<D>>,
-    ) -> Result<()> {
-        let plan = self.transfer_plan();
-        let rigid: Vec<Option<Vector<D>>> =
-            self.materials.iter().map(|m| m.rigid_velocity()).collect();
-        let work = &mut *self.work;
-        // Every phase reads the bins and the body accelerations: out of the workspace meanwhile.
-        let bins = std::mem::take(&mut work.bins);
-        let body_acceleration = std::mem::take(&mut work.body_acceleration);
-        let inputs = StepInputs {
-            grid: self.grid,
-            particles: &*self.particles,
-            stencils,
-            stored,
-            bins: &bins,
-            walls: &self.options.walls,
-            options: self.options,
-            shape: self.shape,
-            materials: self.materials,
-            rigid: &rigid,
-            body_acceleration: self.body_force.then_some(&body_acceleration[..]),
-            boundary: &*self.boundary,
-            fast_paths: self.fast_paths,
-            label: self.label,
-            plan,
-            surface_plan: self.surface_plan,
-            dt,
-        };
-        let result = run_phases(&inputs, &mut *self.vc, &mut *self.surface, work);
-        work.bins = bins;
-        work.body_acceleration = body_acceleration;
-        result
+    fn transfer_plan(&self) -> TransferPlan {
+        match self.options.transfer {
+            Transfer::PicFlip { flip } => TransferPlan {
+                flip,
+                apic: false,
+                inverse_inertia: None,
+                mls: false,
+            },
+            Transfer::Apic | Transfer::Mls => TransferPlan {
+                flip: 0.0,
+                apic: true,
+                inverse_inertia: self
+                    .shape
+                    .apic_inertia(self.grid.cell_size)
+                    .map(|d| 1.0 / d),
+                mls: self.options.transfer == Transfer::Mls,
+            },
+        }
+    }
+
+    /// Signed shape functions: the stencils' transfer weights ([`edge_lumping`]), per body
+    /// under contact.
+    fn blend_transfer_weights(&mut self, stencils: &mut Stencils<D>) {
+        let (grid, walls, ps) = (&self.grid, &self.options.walls, &self.particles);
+        let work = &mut self.work;
+        if self.options.contact.is_some() {
+            for (b, nodes) in work.bodies.nodes.iter_mut().enumerate() {
+                edge_lumping::blend_transfer_weights(
+                    grid,
+                    walls,
+                    ps,
+                    Some(b as u32),
+                    stencils,
+                    nodes,
+                );
+            }
+        } else {
+            edge_lumping::blend_transfer_weights(grid, walls, ps, None, stencils, &mut work.nodes);
+        }
     }
 
     /// Swaps the checked new state into the particles (the old one becomes the next step's
@@ -392,209 +452,37 @@ impl<const D: usize> Step<'_, D> {
     }
 }
 
-/// The phases of METHOD.md section 1 after the shape functions, in order. The new particle
-/// state is left in `work.new_state` when every check passed.
-fn run_phases<const D: usize, S: StencilView<D>>(
-    inputs: &StepInputs<'_, D, S>,
-    vc: &mut Option<VcCorrection<D>>,
-    surface: &mut BoundaryPoints<D>,
-    work: &mut Workspace<D>,
-) -> Result<()> {
-    let mut clock = std::time::Instant::now();
-    // Whether to store the particles in block order this step (with the bins' time).
-    let lanes = inputs.stencils.lanes();
-    let scattered = inputs.fast_paths.particle_sorting && inputs.bins.is_scattered(lanes);
-    work.times.bins += lap(&mut clock);
-    // 2. Body forces (the callback ran before the pool took over), the boundary points and
-    //    the VC corrections.
-    let found = vc_corrections::boundary_and_corrections(inputs, vc, surface, work)?;
-    let boundary = if found { &*surface } else { inputs.boundary };
-    // 3–4. Particle to grid and the grid update: one field, or one per body and contact.
-    let vc = vc.as_ref();
-    let (mass_floor, body_surfaces) = particle_to_grid_and_update(inputs, vc, boundary, work)?;
-    // 5–6. Grid to particle and the constitutive update; boundary points move with the grid.
-    let moving =
-        (vc.is_some() || boundary.has_tractions()) && (!found || inputs.surface_plan.carry);
-    let moving = moving.then_some(boundary);
-    let all_admissible = grid_to_particle_and_update(inputs, moving, scattered, mass_floor, work);
-    // The checks: every particle, every boundary point.
-    clock = std::time::Instant::now();
-    checks::check_new_state(inputs, all_admissible, work)?;
-    if found && inputs.options.contact.is_some() {
-        *surface = body_surfaces;
-    }
-    work.times.checks += lap(&mut clock);
-    Ok(())
+/// The particles' shape functions for a step (phase 1), in the storage the phases read:
+/// B-spline factors, with VC the same as stored lists beside them; or stored lists.
+enum ShapeFunctions<const D: usize> {
+    Linear(TensorStencils<D, 2>, Option<Stencils<D>>),
+    Quadratic(TensorStencils<D, 3>, Option<Stencils<D>>),
+    Cubic(TensorStencils<D, 4>, Option<Stencils<D>>),
+    Lists(Stencils<D>),
 }
 
-/// Particle to grid and the grid update with the wall conditions (and the tractions of
-/// `boundary`): one field, or under contact one per body and the contact correction. Returns
-/// the mass floor of the grid update and, under contact with VC, the bodies' surfaces.
-fn particle_to_grid_and_update<const D: usize, S: StencilView<D>>(
-    inputs: &StepInputs<'_, D, S>,
-    vc: Option<&VcCorrection<D>>,
-    boundary: &BoundaryPoints<D>,
-    work: &mut Workspace<D>,
-) -> Result<(f64, BoundaryPoints<D>)> {
-    let (grid, ps, plan, dt) = (inputs.grid, inputs.particles, inputs.plan, inputs.dt);
-    let mut clock = std::time::Instant::now();
-    let (v, c) = (&ps.velocity[..], &ps.affine[..]);
-    let velocity = move |p: usize| v[p];
-    let affine_map = plan.apic.then_some(move |p: usize| c[p]);
-    let forces = Forces {
-        gravity: inputs.options.gravity,
-        body: inputs.body_acceleration,
-        vc,
-        mls: plan
-            .inverse_inertia
-            .filter(|_| plan.mls)
-            .map(|inverse_inertia| (dt, inverse_inertia)),
-    };
-    // Nodes at or below this mass get no velocity. Signed shape functions and linear hats:
-    // a fraction of the largest particle mass (which particle to grid returns), since their
-    // node masses may be tiny where the force or the velocity gradient is not. The smooth
-    // nonnegative ones (B-splines, RK1): only empty nodes, so that no node's momentum or
-    // force is dropped and a free body's momentum is kept to round-off (with the floor a
-    // cubic B-spline block drifted by 1e-10 of M·v in 1000 steps).
-    let floored = inputs.shape.is_signed() || matches!(inputs.options.shape, Shape::Linear);
-    let mass_floor_fraction = if floored { 1e-10 } else { 0.0 };
-    if let Some(contact) = inputs.options.contact {
-        let body_inputs = contact::BodyInputs {
-            contact,
-            forces,
-            volumes: &work.volumes,
-            mass_floor_fraction,
+impl<const D: usize> ShapeFunctions<D> {
+    /// Back into the workspace, for the next step to fill without allocating.
+    fn put_back(self, work: &mut Workspace<D>) {
+        let stored = match self {
+            ShapeFunctions::Linear(s, stored) => {
+                work.linear = s;
+                stored
+            }
+            ShapeFunctions::Quadratic(s, stored) => {
+                work.quadratic = s;
+                stored
+            }
+            ShapeFunctions::Cubic(s, stored) => {
+                work.cubic = s;
+                stored
+            }
+            ShapeFunctions::Lists(s) => Some(s),
         };
-        work.node_losses = NodeLosses::default();
-        let result = contact::particle_to_grid_per_body(
-            inputs,
-            &body_inputs,
-            &mut work.bodies,
-            &mut work.boundary_stencils,
-            &mut work.times,
-            &mut work.node_losses,
-        );
-        work.times.grid_update += lap(&mut clock);
-        return result;
+        if let Some(stored) = stored {
+            work.stencils = stored;
+        }
     }
-    let mass_floor = mass_floor_fraction
-        * particle_to_grid(
-            &ToGrid {
-                grid,
-                particles: ps,
-                bins: inputs.bins,
-                stencils: inputs.stencils,
-                shape: inputs.stored,
-            },
-            velocity,
-            affine_map,
-            Some(forces),
-            None,
-            &mut work.nodes,
-        );
-    if let (Some(vc), Some(stored)) = (vc, inputs.stored) {
-        let (walls, all) = (inputs.walls, |_| true);
-        let found = vc.bodies();
-        vc_torque::remove_vc_torque(grid, walls, stored, ps.len(), all, found, &mut work.nodes);
-    }
-    if boundary.has_tractions() {
-        apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
-    }
-    work.times.particle_to_grid += lap(&mut clock);
-    let no_force = forces.mls.is_some() && !boundary.has_tractions();
-    let friction = grid_update(
-        grid,
-        inputs.walls,
-        &mut work.nodes,
-        Some(dt),
-        mass_floor,
-        no_force,
-    );
-    work.node_losses = NodeLosses {
-        friction,
-        contact: 0.0,
-    };
-    work.times.grid_update += lap(&mut clock);
-    Ok((mass_floor, BoundaryPoints::default()))
-}
-
-/// Grid to particle into `work.new_state`, in block order when the particles have `scattered`
-/// (USL), with the constitutive update: inside the same pass under USL, after MUSL's second
-/// map otherwise. The `moving` boundary points move with the grid. Returns whether every
-/// particle passed its checks, and leaves the signal speed in `work.new_signal_speed`.
-fn grid_to_particle_and_update<const D: usize, S: StencilView<D>>(
-    inputs: &StepInputs<'_, D, S>,
-    moving: Option<&BoundaryPoints<D>>,
-    scattered: bool,
-    mass_floor: f64,
-    work: &mut Workspace<D>,
-) -> bool {
-    let (grid, ps, dt) = (inputs.grid, inputs.particles, inputs.dt);
-    let mut clock = std::time::Instant::now();
-    // 6. (defined here, run inside the gather under USL) Constitutive update: elastic models
-    //    from F, history models by return mapping from their state and the increment
-    //    ΔF = F^{n+1} (F^n)⁻¹; particles kept inside the walls; the checks.
-    let finish = ConstitutiveUpdate {
-        domain: grid.domain(),
-        particles: ps,
-        materials: inputs.materials,
-        walls: inputs.walls,
-        any_wall: inputs.walls.any_wall(),
-        dt,
-    };
-    let mut admissible = std::mem::take(&mut work.admissible);
-
-    // 5. Grid to particle, in block order when the particles have scattered (USL).
-    let mut new = std::mem::take(&mut work.new_state);
-    let usl = inputs.options.scheme == Scheme::Usl;
-    work.reorder = match scattered {
-        false => Reorder::No,
-        true if usl && !work.reorder_at_commit => Reorder::InGather,
-        true => Reorder::AtCommit,
-    };
-    let source = (work.reorder == Reorder::InGather).then_some(&inputs.bins.order[..]);
-    let fields = match inputs.options.contact {
-        Some(_) => Fields::PerBody(&work.bodies.nodes, &ps.material),
-        None => Fields::One(&work.nodes),
-    };
-    let from = FromGrid {
-        grid,
-        particles: ps,
-        stencils: inputs.stencils,
-        fields,
-        rigid: inputs.rigid,
-        plan: inputs.plan,
-        dt,
-    };
-    let (mut speed, mut all_admissible) = grid_to_particle(
-        &from,
-        usl.then_some(&finish),
-        source,
-        &mut new,
-        &mut admissible,
-    );
-    if !usl {
-        // MUSL: the new particle momenta mapped to the grid again, and `F` from those
-        // grid velocities.
-        musl::second_map(inputs, mass_floor, &mut work.nodes, &mut new);
-    }
-
-    // Boundary points move with the grid like massless particles.
-    work.boundary_updates.clear();
-    if let Some(boundary) = moving {
-        let bs = &work.boundary_stencils;
-        move_boundary_points(boundary, bs, &work.nodes, dt, &mut work.boundary_updates);
-    }
-
-    work.times.grid_to_particle += lap(&mut clock);
-    if !usl {
-        (speed, all_admissible) = finish.run_all(&mut new, &mut admissible);
-        work.times.constitutive += lap(&mut clock);
-    }
-    work.admissible = admissible;
-    work.new_state = new;
-    work.new_signal_speed = speed;
-    all_admissible
 }
 
 #[cfg(test)]

@@ -5,13 +5,84 @@
 //! [`super::edge_lumping`] (`Ψ` inside a body); the force takes the gradients `∇Ψ` and VC's
 //! correction is weighted with `Ψ`, as VC computed it.
 
+use super::profile::lap;
+use super::{StepInputs, Workspace};
 use crate::grid::Bins;
 use crate::grid::{scatter_add, NodeScatter};
 use crate::grid::{Grid, GridNodes};
-use crate::integration::VcCorrection;
+use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::options::Shape;
 use crate::particles::Particles;
 use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils};
 use crate::{Matrix, Vector};
+
+/// Phase 3: the particles' mass, momentum and force to the grid: to the one field, with VC's
+/// torque removed and the tractions of `boundary` added, or under contact to each body's own
+/// field. Returns the mass at or below which the grid update gives a node no velocity: for
+/// signed shape functions and linear hats a fraction of the largest particle mass (their node
+/// masses may be tiny where the force or the velocity gradient is not); for the smooth
+/// nonnegative ones (B-splines, RK1) only empty nodes, so that no node's momentum or force is
+/// dropped and a free body's momentum is kept to round-off (with the floor a cubic B-spline
+/// block drifted by 1e-10 of M·v in 1000 steps).
+pub(super) fn phase<const D: usize, S: StencilView<D>>(
+    inputs: &StepInputs<'_, D, S>,
+    vc: Option<&VcCorrection<D>>,
+    boundary: &BoundaryPoints<D>,
+    work: &mut Workspace<D>,
+) -> f64 {
+    let (grid, ps, plan) = (inputs.grid, inputs.particles, inputs.plan);
+    let mut clock = std::time::Instant::now();
+    let forces = Forces {
+        gravity: inputs.options.gravity,
+        body: inputs.body_acceleration,
+        vc,
+        mls: plan
+            .inverse_inertia
+            .filter(|_| plan.mls)
+            .map(|inverse_inertia| (inputs.dt, inverse_inertia)),
+    };
+    let floored = inputs.shape.is_signed() || matches!(inputs.options.shape, Shape::Linear);
+    let mass_floor_fraction = if floored { 1e-10 } else { 0.0 };
+    if inputs.options.contact.is_some() {
+        let floor = super::contact::particle_to_grid_per_body(
+            inputs,
+            forces,
+            mass_floor_fraction,
+            &mut work.bodies,
+        );
+        work.times.particle_to_grid += lap(&mut clock);
+        return floor;
+    }
+    let (v, c) = (&ps.velocity[..], &ps.affine[..]);
+    let velocity = move |p: usize| v[p];
+    let affine_map = plan.apic.then_some(move |p: usize| c[p]);
+    let largest_mass = particle_to_grid(
+        &ToGrid::of(inputs),
+        velocity,
+        affine_map,
+        Some(forces),
+        None,
+        &mut work.nodes,
+    );
+    if let (Some(vc), Some(stored)) = (vc, inputs.stored) {
+        let (walls, all) = (inputs.walls, |_| true);
+        let found = vc.bodies();
+        super::vc_torque::remove_vc_torque(
+            grid,
+            walls,
+            stored,
+            ps.len(),
+            all,
+            found,
+            &mut work.nodes,
+        );
+    }
+    if boundary.has_tractions() {
+        super::surface::apply_tractions(boundary, &work.boundary_stencils, &mut work.nodes);
+    }
+    work.times.particle_to_grid += lap(&mut clock);
+    mass_floor_fraction * largest_mass
+}
 
 /// What the first map accumulates besides momentum: mass and forces.
 #[derive(Clone, Copy)]
@@ -38,6 +109,19 @@ pub struct ToGrid<'a, const D: usize, S> {
     /// The stored stencils, whose values `Ψ` weigh VC's correction where the transfer weights
     /// differ from them (signed shape functions).
     pub shape: Option<&'a Stencils<D>>,
+}
+
+impl<'a, const D: usize, S> ToGrid<'a, D, S> {
+    /// The step's particles, bins and stencils.
+    pub(super) fn of(inputs: &StepInputs<'a, D, S>) -> Self {
+        ToGrid {
+            grid: inputs.grid,
+            particles: inputs.particles,
+            bins: inputs.bins,
+            stencils: inputs.stencils,
+            shape: inputs.stored,
+        }
+    }
 }
 
 /// Scatters particle quantities to the nodes of their stencils and marks those nodes active.

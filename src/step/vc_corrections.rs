@@ -1,7 +1,7 @@
 //! The boundary points and the VC corrections of a step (METHOD.md section 3): the given
 //! boundary points, or for VC without any the surface found from the particles as they are now
-//! (under contact each body's own, found with its correction in `contact`); their stencils; and
-//! the corrections of the test-function gradients ([`VcCorrection::compute`]).
+//! (under contact each body's own, with its correction, `contact::vc_per_body`); their
+//! stencils; and the corrections of the test-function gradients ([`VcCorrection::compute`]).
 
 use super::profile::lap;
 use super::surface::found_surface;
@@ -10,15 +10,16 @@ use crate::error::Result;
 use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use crate::shape::StencilView;
 
-/// Sets up the boundary points the step needs (VC or tractions) and computes the VC
-/// corrections of the one field (under contact, prepares one correction per body). Returns
-/// whether the boundary points are the surface found from the particles (then in `surface`).
+/// Phase 2: sets up the boundary points the step needs (VC or tractions) and computes the VC
+/// corrections of the one field, or under contact each body's. Returns whether the boundary
+/// points are the surface found from the particles (then in `surface`) and, under contact with
+/// VC, the bodies' surfaces.
 pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
     inputs: &StepInputs<'_, D, S>,
     vc: &mut Option<VcCorrection<D>>,
     surface: &mut BoundaryPoints<D>,
     work: &mut Workspace<D>,
-) -> Result<bool> {
+) -> Result<(bool, BoundaryPoints<D>)> {
     let (grid, ps, contact) = (inputs.grid, inputs.particles, inputs.options.contact);
     let mut clock = std::time::Instant::now();
     let found = vc.is_some() && inputs.boundary.is_empty();
@@ -64,5 +65,12 @@ pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
         vc.compute(vc_inputs, &mut work.nodes);
     }
     work.times.forces_and_vc += lap(&mut clock);
-    Ok(found)
+    let mut body_surfaces = BoundaryPoints::default();
+    if vc.is_some() && contact.is_some() {
+        let (volumes, bodies) = (&work.volumes, &mut work.bodies);
+        let stencils = &mut work.boundary_stencils;
+        let times = &mut work.times;
+        body_surfaces = super::contact::vc_per_body(inputs, volumes, bodies, stencils, times)?;
+    }
+    Ok((found, body_surfaces))
 }
