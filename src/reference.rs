@@ -5,11 +5,14 @@
 //! `fast_step_matches_the_reference_step`): both must give the same particle state to round-off.
 //!
 //! It covers what the fast step does with one velocity field, or one per body under contact
-//! (deformable or rigid), and gravity: linear hats, B-splines, RK of order 1 and of order 2
-//! (signed, with the transfer weights of `edge_lumping` at a body's edge), every transfer
-//! (PIC/FLIP, APIC, MLS), both schemes (USL, MUSL), every kind of wall, every material,
-//! material-point integration and VC of order 1 and 2 over the surface found from the particles
-//! or over given boundary points (which carry tractions and move with the grid, without contact). The
+//! (deformable or rigid), and gravity: linear hats, B-splines, RK of order 1 (on the lattice
+//! with ã = 2, and off it) and of orders 2 and 3 (signed, with the transfer weights of
+//! `edge_lumping` at a body's edge), every transfer (PIC/FLIP, APIC, MLS), both schemes (USL,
+//! MUSL), every kind of wall, every material (elastic, neo-Hookean, Drucker–Prager with and
+//! without the μ(I) rheology, Johnson–Cook with damage), material-point integration and VC of
+//! order 1 and 2 over the surface found from the particles or over given boundary points (which
+//! carry tractions and move with the grid, without contact); the property tests draw the fast
+//! step's paths too (vector instructions, factored stencils, particle sorting). The
 //! wall conditions are the walls' own (`Walls::fold`, `apply_friction`, `unfold`), the stresses
 //! the materials' own, the edge-lumping node weights `EdgeLumping::blend`'s, the contact law
 //! `contact::correct_velocities`'s and the found surface `BoundaryPoints::of_particles`'s: the
@@ -1271,6 +1274,8 @@ mod tests {
         small: bool,
         /// 0: one body; 1: two deformable bodies in contact; 2: a deformable and a rigid one.
         contact: usize,
+        /// The fast step's paths: vector instructions, factored stencils, particle sorting.
+        fast_paths: (bool, bool, bool),
         /// Without contact, 0: no boundary points (VC finds the surface); 1: the block's faces
         /// given as boundary points; 2: those with tractions.
         boundary: usize,
@@ -1279,15 +1284,16 @@ mod tests {
     fn cases() -> impl Strategy<Value = Case> {
         (
             any::<u64>(),
-            0..5usize,
+            0..7usize,
             0..3usize,
             0.0..1.0f64,
             any::<bool>(),
             prop::array::uniform6(0..4usize),
-            0..3usize,
+            0..5usize,
             any::<bool>(),
             (0..3u32, 0..3usize),
             0..3usize,
+            (any::<bool>(), any::<bool>(), any::<bool>()),
         )
             .prop_map(
                 |(
@@ -1301,6 +1307,7 @@ mod tests {
                     body_force,
                     (vc, contact),
                     boundary,
+                    fast_paths,
                 )| Case {
                     seed,
                     shape,
@@ -1313,6 +1320,7 @@ mod tests {
                     vc,
                     contact,
                     boundary,
+                    fast_paths,
                     small: false,
                 },
             )
@@ -1340,10 +1348,25 @@ mod tests {
                 order: 2,
                 support: 3.0,
             },
+            // RK1 off the lattice (ã = 2.5: node by node, not the cubic B-spline).
+            Shape::Rk {
+                order: 1,
+                support: 2.5,
+            },
+            // RK3 in 2D; in 3D RK2 (RK3's 512-node stencils would take the reference minutes).
+            Shape::Rk {
+                order: if D == 2 { 3 } else { 2 },
+                support: if D == 2 { 4.0 } else { 3.0 },
+            },
         ][case.shape];
         sim.set_shape(shape).unwrap();
-        // APIC and MLS do not take RK of order 2 (signed).
-        let signed = case.shape == 4;
+        sim.set_fast_paths(crate::options::FastPaths {
+            vector_instructions: case.fast_paths.0,
+            factored_stencils: case.fast_paths.1,
+            particle_sorting: case.fast_paths.2,
+        });
+        // APIC and MLS do not take RK of order 2 or more (signed).
+        let signed = matches!(shape, Shape::Rk { order: 2.., .. });
         let transfer = match case.transfer {
             _ if signed => Transfer::PicFlip { flip: case.flip },
             0 => Transfer::PicFlip { flip: case.flip },
@@ -1395,9 +1418,33 @@ mod tests {
         let material = match case.material {
             0 => Material::linear_elastic(1000.0, 1e5, 0.3),
             1 => Material::neo_hookean(1000.0, 1e5, 0.3),
+            // A soft Johnson–Cook metal that yields, heats and accumulates damage here (far from
+            // failure, whose stress drop a round-off could trigger in one step and not the other).
+            3 => Material::johnson_cook(crate::material::JohnsonCookParameters {
+                density: 1000.0,
+                young: 1e5,
+                poisson: 0.3,
+                a: 50.0,
+                b: 100.0,
+                n: 0.3,
+                c: 0.01,
+                reference_strain_rate: 1.0,
+                m: 1.0,
+                room_temperature: 293.0,
+                melt_temperature: 1000.0,
+                specific_heat: 0.5,
+                taylor_quinney: 0.9,
+                damage: Some([0.5, 0.5, -1.5, 0.01, 0.5]),
+                eos: None,
+            }),
+            // 2: Drucker–Prager; 4: with the μ(I) rheology (below).
             _ => Material::drucker_prager(1000.0, 1e5, 0.3, 30.0, 50.0, 0.0),
         };
         let id = sim.add_material(material.unwrap());
+        if case.material == 4 {
+            let rheology = crate::material::InertialRheology::new(0.26, 0.28, 1e-3).unwrap();
+            sim.set_rheology(id, Some(rheology)).unwrap();
+        }
         // Under contact the particles beyond the middle of the block along x are a second body.
         let second = match case.contact {
             0 => id,
@@ -1545,6 +1592,7 @@ mod tests {
             vc: 1,
             contact: 0,
             boundary: 0,
+            fast_paths: (true, true, true),
             small: false,
         };
         for refresh in [1, 2, 4] {
@@ -1616,6 +1664,7 @@ mod tests {
                 vc: 2,
                 contact: 0,
                 boundary,
+                fast_paths: (true, true, true),
                 small: true,
             };
             let mut sim = scene::<3>(&case);
