@@ -2,17 +2,16 @@
 //!
 //! Each choice is a Rust enum whose variants may carry parameters (`Shape::Rk { order, support }`),
 //! and a parameter-free *kind* (`ShapeKind`): a `#[repr(u32)]` enum whose discriminants are the
-//! codes of the C API (`RKMPM_SHAPE_*`) and of checkpoint files, and whose serde names are the
-//! spellings of scene files (`shape = "bspline2"`). `TryFrom<u32>` turns a code into a kind and
-//! refuses unknown codes; `kind()` and `from_kind` go between a kind and its option. The
-//! constants of the C API (`capi/`) and of the Fortran module spell the same codes for their
-//! users; tests check both against these kinds.
+//! codes of the C API (`RKMPM_SHAPE_*`) and of checkpoint files, and whose serde names (feature
+//! `serde`) are the spellings of scene files (`shape = "bspline2"`). `TryFrom<u32>` turns a code
+//! into a kind and refuses unknown codes; `kind()` and `from_kind` go between a kind and its
+//! option. The constants of the C API (`capi/`) and of the Fortran module spell the same codes
+//! for their users; tests check both against these kinds.
 //!
 //! This module imports nothing else of the engine, so every module can import it.
 
 use crate::Vector;
 use num_enum::{IntoPrimitive, TryFromPrimitive};
-use serde::Deserialize;
 
 /// The shape functions of the grid.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,10 +30,9 @@ pub enum Shape {
 
 /// Which [`Shape`], without its parameters (`RKMPM_SHAPE_*`; scene files: `shape`).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum ShapeKind {
     Linear = 0,
     #[default]
@@ -91,10 +89,9 @@ pub enum Integration {
 
 /// Which [`Integration`], without its order (`RKMPM_INTEGRATION_*`; scene files: `integration`).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum IntegrationKind {
     #[default]
     MaterialPoint = 0,
@@ -139,10 +136,9 @@ pub enum Transfer {
 
 /// Which [`Transfer`], without its FLIP weight (`RKMPM_TRANSFER_*`; scene files: `transfer`).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum TransferKind {
     PicFlip = 0,
     #[default]
@@ -177,10 +173,9 @@ impl Transfer {
 /// Where the stress update and the second velocity map sit (`RKMPM_SCHEME_*`; scene files:
 /// `scheme`).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum Scheme {
     /// Update stress last: the velocity gradient uses the grid velocities of the grid update.
     #[default]
@@ -205,10 +200,9 @@ pub enum Wall {
 
 /// Which [`Wall`], without its friction (`RKMPM_BOUNDARY_*`; scene files: `kind` of a wall).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum WallKind {
     #[default]
     Free = 0,
@@ -247,8 +241,9 @@ impl Wall {
 }
 
 /// Which face of an axis (scene files: `side`; the C API passes −1 and +1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum Side {
     Low = 0,
     High = 1,
@@ -396,10 +391,9 @@ impl Default for FastPaths {
 
 /// How VTK files store their arrays (`RKMPM_VTK_*`; scene files: `vtk` of `[run]`).
 #[repr(u32)]
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, TryFromPrimitive, IntoPrimitive,
-)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, TryFromPrimitive, IntoPrimitive)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum VtkFormat {
     /// Raw little-endian bytes appended after the XML (`<AppendedData encoding="raw">`), as
     /// ParaView writes them: exact values, written many times faster; 0.4 to 0.6 of the text's
