@@ -86,6 +86,13 @@ pub struct TransferPlan {
     pub mls: bool,
 }
 
+impl TransferPlan {
+    /// `1 / D_p` under MLS (whose force rides on the affine momentum), `None` otherwise.
+    pub fn mls_inverse_inertia(&self) -> Option<f64> {
+        self.inverse_inertia.filter(|_| self.mls)
+    }
+}
+
 /// What the phases of one step read and none of them changes.
 pub(crate) struct StepInputs<'a, const D: usize, S> {
     pub grid: &'a Grid<D>,

@@ -26,8 +26,7 @@ pub(super) fn phase<const D: usize, S: StencilView<D>>(
         Some(contact) => super::contact::grid_update_per_body(inputs, contact, &mut work.bodies),
         None => {
             let (plan, dt) = (inputs.plan, inputs.dt);
-            let mls = plan.mls && plan.inverse_inertia.is_some();
-            let no_force = mls && !boundary.has_tractions();
+            let no_force = plan.mls_inverse_inertia().is_some() && !boundary.has_tractions();
             let friction = grid_update(
                 inputs.grid,
                 inputs.walls,

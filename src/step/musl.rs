@@ -57,10 +57,8 @@ pub(super) fn second_map<const D: usize, S: StencilView<D>>(
         .par_iter_mut()
         .enumerate()
         .for_each(|(p, f)| {
-            let l = match (plan.mls, plan.inverse_inertia) {
-                (true, Some(inv)) => {
-                    mls_velocity_gradient(stencils, grid, nodes, p, &ps.position[p], inv)
-                }
+            let l = match plan.mls_inverse_inertia() {
+                Some(inv) => mls_velocity_gradient(stencils, grid, nodes, p, &ps.position[p], inv),
                 _ => velocity_gradient(stencils, nodes, p),
             };
             *f = (Matrix::<D>::identity() + dt * l) * ps.deformation_gradient[p];

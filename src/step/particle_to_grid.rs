@@ -37,8 +37,7 @@ pub(super) fn phase<const D: usize, S: StencilView<D>>(
         body: inputs.body_acceleration,
         vc,
         mls: plan
-            .inverse_inertia
-            .filter(|_| plan.mls)
+            .mls_inverse_inertia()
             .map(|inverse_inertia| (inputs.dt, inverse_inertia)),
     };
     let floored = inputs.shape.is_signed() || matches!(inputs.options.shape, Shape::Linear);
