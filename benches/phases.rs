@@ -71,8 +71,8 @@ fn p2g<const D: usize, S: StencilView<D>>(
     };
     particle_to_grid(
         &to,
-        |p| ps.velocity[p],
-        Some(|p: usize| ps.affine[p]),
+        |p| ps.velocity()[p],
+        Some(|p: usize| ps.affine()[p]),
         Some(forces),
         None,
         nodes,
@@ -102,9 +102,9 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
     let mut factors = TensorStencils::<D, 3>::default();
     // Computed once here too, so that a filtered run (`... --bench phases -- g2p`) that skips
     // the shape and bins benchmarks still maps real stencils.
-    factors.compute(&quadratic, &grid, &ps.position);
+    factors.compute(&quadratic, &grid, ps.position());
     g.bench_function(BenchmarkId::new("shape", "bspline2 factors"), |b| {
-        b.iter(|| factors.compute(&quadratic, &grid, &ps.position))
+        b.iter(|| factors.compute(&quadratic, &grid, ps.position()))
     });
     for (name, shape) in [("rk1", rk1), ("rk2", rk2)] {
         let f: Box<dyn ShapeFunction<D>> = shape.build().unwrap();
@@ -113,15 +113,15 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         let mut stored = Stencils::<D>::default();
         g.bench_function(
             BenchmarkId::new("shape", format!("{name} moment solves")),
-            |b| b.iter(|| stored.compute(f.as_ref(), &grid, &ps.position)),
+            |b| b.iter(|| stored.compute(f.as_ref(), &grid, ps.position())),
         );
     }
 
     // Binning, then the transfers with the quadratic B-spline.
     let mut bins = Bins::<D>::default();
-    rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, &ps.position);
+    rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, ps.position());
     g.bench_function("bins", |b| {
-        b.iter(|| rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, &ps.position))
+        b.iter(|| rkmpm::shape::bin_particles(&mut bins, &quadratic, &grid, ps.position()))
     });
     let mut nodes = GridNodes::<D>::default();
     nodes.ensure(&grid, false, false, false).unwrap();
@@ -135,7 +135,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
         b.iter(|| p2g(&grid, &ps, &bins, &factors.local(), forces, &mut nodes))
     });
     // MLS: the force on the affine momentum, mass and momentum only.
-    let inverse_inertia = 4.0 / (grid.cell_size * grid.cell_size);
+    let inverse_inertia = 4.0 / (grid.cell_size() * grid.cell_size());
     let mls_forces = Forces {
         mls: Some((dt, inverse_inertia)),
         ..forces
@@ -176,9 +176,9 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
 
     // VC correction (order 1) with the quadratic B-spline, stencils stored node by node.
     let mut stored = Stencils::<D>::default();
-    stored.compute(&quadratic, &grid, &ps.position);
+    stored.compute(&quadratic, &grid, ps.position());
     let volumes: Vec<f64> = (0..ps.len()).map(|p| ps.volume(p)).collect();
-    let (bx, bn) = BoundaryPoints::from_lattice(&ps.position, &ps.reference_volume);
+    let (bx, bn) = BoundaryPoints::from_lattice(ps.position(), ps.reference_volume());
     let mut boundary = BoundaryPoints::<D>::default();
     boundary.add(&bx, &bn, None).unwrap();
     let mut boundary_stencils = Stencils::<D>::default();
@@ -190,7 +190,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
             let inputs = VcInputs {
                 grid: &grid,
                 bins: &bins,
-                positions: &ps.position,
+                positions: ps.position(),
                 volumes: &volumes,
                 stencils: &stored,
                 boundary: &boundary,

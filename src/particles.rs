@@ -17,34 +17,34 @@ use rayon::prelude::*;
 #[derive(Debug, Default, Clone, PartialEq)]
 pub struct Particles<const D: usize> {
     /// Current position `x_p`.
-    pub position: Vec<Vector<D>>,
+    pub(crate) position: Vec<Vector<D>>,
     /// Position at insertion `X_p` (displacement is `x_p − X_p`).
-    pub reference_position: Vec<Vector<D>>,
-    pub velocity: Vec<Vector<D>>,
+    pub(crate) reference_position: Vec<Vector<D>>,
+    pub(crate) velocity: Vec<Vector<D>>,
     /// Deformation gradient `F_p`.
-    pub deformation_gradient: Vec<Matrix<D>>,
+    pub(crate) deformation_gradient: Vec<Matrix<D>>,
     /// Reference volume `V0_p`; the current volume is `det(F_p) V0_p`.
-    pub reference_volume: Vec<f64>,
-    pub mass: Vec<f64>,
+    pub(crate) reference_volume: Vec<f64>,
+    pub(crate) mass: Vec<f64>,
     /// Cauchy stress (the in-plane block in 2D).
-    pub stress: Vec<Matrix<D>>,
+    pub(crate) stress: Vec<Matrix<D>>,
     /// Pressure `−tr(σ)/3`, out-of-plane stress included in 2D (plane strain).
-    pub pressure: Vec<f64>,
+    pub(crate) pressure: Vec<f64>,
     /// Index into the simulation's materials.
-    pub material: Vec<u32>,
+    pub(crate) material: Vec<u32>,
     /// APIC affine velocity matrix `C_p` (empty under PIC/FLIP).
-    pub affine: Vec<Matrix<D>>,
+    pub(crate) affine: Vec<Matrix<D>>,
     /// History of elastoplastic materials (`F_e`, plastic strain); empty until particles of a
     /// history material are added, so elastic scenes carry none of it.
-    pub history: Vec<History>,
+    pub(crate) history: Vec<History>,
     /// The id of the particle in each slot: the index it was added with (`0, 1, …` over all
     /// calls to `Sim::add_particles`).
-    pub id: Vec<u32>,
+    pub(crate) id: Vec<u32>,
 }
 
 /// Buffers [`Particles::permute`] gathers into, one per element type.
 #[derive(Debug, Default, Clone)]
-pub struct SpareArrays<const D: usize> {
+pub(crate) struct SpareArrays<const D: usize> {
     vectors: Vec<Vector<D>>,
     matrices: Vec<Matrix<D>>,
     scalars: Vec<f64>,
@@ -140,6 +140,50 @@ impl Field {
 }
 
 impl<const D: usize> Particles<D> {
+    /// Current positions `x_p`.
+    pub fn position(&self) -> &[Vector<D>] {
+        &self.position
+    }
+    /// Positions at insertion `X_p` (the displacement is `x_p − X_p`).
+    pub fn reference_position(&self) -> &[Vector<D>] {
+        &self.reference_position
+    }
+    pub fn velocity(&self) -> &[Vector<D>] {
+        &self.velocity
+    }
+    /// Deformation gradients `F_p`.
+    pub fn deformation_gradient(&self) -> &[Matrix<D>] {
+        &self.deformation_gradient
+    }
+    /// Reference volumes `V0_p`; the current volume is [`Particles::volume`].
+    pub fn reference_volume(&self) -> &[f64] {
+        &self.reference_volume
+    }
+    pub fn mass(&self) -> &[f64] {
+        &self.mass
+    }
+    /// Cauchy stresses (the in-plane block in 2D).
+    pub fn stress(&self) -> &[Matrix<D>] {
+        &self.stress
+    }
+    /// Pressures `−tr(σ)/3`, the out-of-plane stress included in 2D (plane strain).
+    pub fn pressure(&self) -> &[f64] {
+        &self.pressure
+    }
+    /// Each particle's index into the simulation's materials.
+    pub fn material(&self) -> &[u32] {
+        &self.material
+    }
+    /// APIC's affine velocity matrices `C_p` (empty under PIC/FLIP).
+    pub fn affine(&self) -> &[Matrix<D>] {
+        &self.affine
+    }
+    /// The history of elastoplastic materials (`F_e`, plastic strain, damage); empty when no
+    /// particle has a history material.
+    pub fn history(&self) -> &[History] {
+        &self.history
+    }
+
     pub fn len(&self) -> usize {
         self.position.len()
     }
@@ -200,7 +244,7 @@ impl<const D: usize> Particles<D> {
 
     /// The slot of each id (the inverse of [`Particles::id`]): `slots()[id]` is where particle
     /// `id` is stored.
-    pub fn slots(&self) -> Vec<usize> {
+    pub(crate) fn slots(&self) -> Vec<usize> {
         let mut slots = vec![0; self.len()];
         for (p, &id) in self.id.iter().enumerate() {
             slots[id as usize] = p;
@@ -219,14 +263,14 @@ impl<const D: usize> Particles<D> {
     }
 
     /// Whether every particle is in the slot of its id (nothing sorted yet).
-    pub fn in_id_order(&self) -> bool {
+    pub(crate) fn in_id_order(&self) -> bool {
         self.id.iter().enumerate().all(|(p, &id)| id as usize == p)
     }
 
     /// Stores the particles in the order `order` (a permutation of the slots): the particle in
     /// slot `order[i]` goes to slot `i`, with all its quantities and its id. `spare` lends the
     /// buffers (kept between calls, so a permutation allocates nothing once they have grown).
-    pub fn permute(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
+    pub(crate) fn permute(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
         assert_eq!(order.len(), self.len(), "a permutation of the particles");
         let s = &mut *spare;
         permute_array(&mut self.position, &mut s.vectors, order);
@@ -241,7 +285,7 @@ impl<const D: usize> Particles<D> {
     /// [`Particles::permute`] of the quantities a step carries unchanged (the reference
     /// position and volume, the mass, the material, the id and the history), for a step whose
     /// grid to particle wrote the others in `order` already.
-    pub fn permute_carried(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
+    pub(crate) fn permute_carried(&mut self, order: &[u32], spare: &mut SpareArrays<D>) {
         assert_eq!(order.len(), self.len(), "a permutation of the particles");
         let s = spare;
         permute_array(&mut self.reference_position, &mut s.vectors, order);

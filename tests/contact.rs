@@ -105,11 +105,11 @@ fn sliding_blocks(contact: bool, rk_vc: bool, mls: bool) -> (Vector<2>, f64) {
         while sim.time() < 0.15 {
             sim.step(dt).unwrap();
         }
-        // Block a's particles are ids 0..144 (the steps sort the storage by grid block).
+        // Block a's particles are ids 0..144 (in id order, as `Sim::particles` gives them).
         let ps = sim.particles();
         let mean_a: Vector<2> = (0..ps.len())
-            .filter(|&p| ps.id[p] < 144)
-            .map(|p| ps.velocity[p])
+            .filter(|&p| p < 144)
+            .map(|p| ps.velocity()[p])
             .sum::<Vector<2>>()
             / 144.0;
         (mean_a, (ps.momentum() - p0).norm())
@@ -154,8 +154,8 @@ fn vc_with_contact_on_one_body_is_vc_without_contact() {
         sim
     };
     let (with, without) = (run(true, false), run(false, false));
-    assert_eq!(with.particles().position, without.particles().position);
-    assert_eq!(with.particles().velocity, without.particles().velocity);
+    assert_eq!(with.particles().position(), without.particles().position());
+    assert_eq!(with.particles().velocity(), without.particles().velocity());
     assert_eq!(with.vc_surface().position, without.vc_surface().position);
     // Two bodies: two closed surfaces, together as long as the two blocks' perimeters after a
     // small deformation (within a few per cent of 4 · 0.3 + 4 · 0.2 = 2.0).
@@ -200,19 +200,19 @@ fn block_bounces_off_a_rigid_slab() {
         sim.step(dt).unwrap();
         let ps = sim.particles();
         for p in 0..ps.len() {
-            if ps.material[p] == body {
-                lowest = lowest.min(ps.position[p][1]);
+            if ps.material()[p] == body {
+                lowest = lowest.min(ps.position()[p][1]);
             }
         }
     }
     let ps = sim.particles();
     // The slab does not move.
     // The slab's particles were added first.
-    assert_eq!(&ps.position[..xs.len()], &xs[..]);
-    assert!(ps.material[..xs.len()].iter().all(|&m| m == slab));
+    assert_eq!(&ps.position()[..xs.len()], &xs[..]);
+    assert!(ps.material()[..xs.len()].iter().all(|&m| m == slab));
     let vy: f64 = (0..ps.len())
-        .filter(|&p| ps.material[p] == body)
-        .map(|p| ps.velocity[p][1])
+        .filter(|&p| ps.material()[p] == body)
+        .map(|p| ps.velocity()[p][1])
         .sum::<f64>()
         / 144.0;
     eprintln!("lowest body particle {lowest:.4} (slab top {top}), mean vy at the end {vy:.3}");
@@ -252,8 +252,8 @@ fn a_rigid_plate_sliding_past_a_block_drags_it_only_with_friction() {
         let of = |sim: &Sim<2>, m: u32| -> Vec<(Vector<2>, Vector<2>)> {
             let ps = sim.particles();
             (0..ps.len())
-                .filter(|&p| ps.material[p] == m)
-                .map(|p| (ps.position[p], ps.velocity[p]))
+                .filter(|&p| ps.material()[p] == m)
+                .map(|p| (ps.position()[p], ps.velocity()[p]))
                 .collect()
         };
         let stopped = of(&sim, plate);

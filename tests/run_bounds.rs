@@ -24,9 +24,9 @@ fn state(sim: &Sim<2>) -> (u64, u64, Vec<u64>) {
     let ps = sim.particles();
     let mut bits = Vec::new();
     for p in 0..ps.len() {
-        bits.extend(ps.position[p].iter().map(|v| v.to_bits()));
-        bits.extend(ps.velocity[p].iter().map(|v| v.to_bits()));
-        bits.extend(ps.deformation_gradient[p].iter().map(|v| v.to_bits()));
+        bits.extend(ps.position()[p].iter().map(|v| v.to_bits()));
+        bits.extend(ps.velocity()[p].iter().map(|v| v.to_bits()));
+        bits.extend(ps.deformation_gradient()[p].iter().map(|v| v.to_bits()));
     }
     (sim.time().to_bits(), sim.steps(), bits)
 }

@@ -77,10 +77,10 @@ fn free_block<const D: usize>(shape: Shape, order: u32, transfer: Transfer) -> S
 fn momentum<const D: usize>(sim: &Sim<D>) -> (V<D>, f64) {
     let ps = sim.particles();
     let p = (0..ps.len())
-        .map(|i| ps.mass[i] * ps.velocity[i])
+        .map(|i| ps.mass()[i] * ps.velocity()[i])
         .sum::<V<D>>();
     let scale = (0..ps.len())
-        .map(|i| ps.mass[i] * ps.velocity[i].norm())
+        .map(|i| ps.mass()[i] * ps.velocity()[i].norm())
         .sum::<f64>();
     (p, scale)
 }
@@ -243,14 +243,11 @@ fn mirror_mismatch_of_drop<const D: usize>(
     let vol = vec![s.powi(D as i32); x.len()];
     sim.add_particles(mat, &x, &vol, None).unwrap();
     let mismatch = |sim: &Sim<D>| {
+        // In id order: each particle beside its image.
         let ps = sim.particles();
-        let mut at = vec![0; ps.len()];
-        for p in 0..ps.len() {
-            at[ps.id[p] as usize] = p;
-        }
         let mut worst = 0.0f64;
         for k in 0..ps.len() / 2 {
-            let (a, b) = (ps.position[at[2 * k]], ps.position[at[2 * k + 1]]);
+            let (a, b) = (ps.position()[2 * k], ps.position()[2 * k + 1]);
             worst = worst.max((a[0] + b[0] - 1.0).abs());
             for c in 1..D {
                 worst = worst.max((a[c] - b[c]).abs());

@@ -576,7 +576,7 @@ pub unsafe extern "C" fn rkmpm_sim_add_material_rigid(
         // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
         let s = unsafe { sim_mut(sim) }?;
         check_ptr("out_id", out_id)?;
-        let d = with_sim!(&s.sim, m => m.grid().cells.len());
+        let d = with_sim!(&s.sim, m => m.grid().cells().len());
         // SAFETY: the array holds the stated number of values (this function's `# Safety`).
         let v = unsafe { slice("velocity", velocity, d) }?;
         let mut v3 = [0.0; 3];
@@ -604,7 +604,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_rigid_velocity(
     gate("rkmpm_sim_set_rigid_velocity", || {
         // SAFETY: `sim` is NULL or a live handle used by this thread only (this function's `# Safety`).
         let s = unsafe { sim_mut(sim) }?;
-        let d = with_sim!(&s.sim, m => m.grid().cells.len());
+        let d = with_sim!(&s.sim, m => m.grid().cells().len());
         // SAFETY: the array holds the stated number of values (this function's `# Safety`).
         let v = unsafe { slice("velocity", velocity, d) }?;
         let mut v3 = [0.0; 3];
@@ -643,7 +643,7 @@ pub unsafe extern "C" fn rkmpm_sim_set_gravity(sim: *mut RkmpmSim, g: *const f64
         let s = unsafe { sim_mut(sim) }?;
         with_sim!(&mut s.sim, m => {
             // SAFETY: `g` holds `dim` values (this function's `# Safety`).
-            let g = unsafe { slice("g", g, m.grid().cells.len()) }?;
+            let g = unsafe { slice("g", g, m.grid().cells().len()) }?;
             m.set_gravity(Vector::from_column_slice(g))?;
         });
         Ok(())
@@ -1616,7 +1616,7 @@ pub unsafe extern "C" fn rkmpm_sim_field_len(
         // SAFETY: `sim` is NULL or a live handle (this function's `# Safety`).
         let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
-        let n = with_sim!(&s.sim, m => f.components(m.grid().cells.len()) * m.particle_count());
+        let n = with_sim!(&s.sim, m => f.components(m.grid().cells().len()) * m.particle_count());
         // SAFETY: the out-pointer is NULL or writable (this function's `# Safety`).
         unsafe { write_out("out_len", out_len, n) }
     })
@@ -1643,7 +1643,7 @@ pub unsafe extern "C" fn rkmpm_sim_get_particles(
         let s = unsafe { sim_ref(sim) }?;
         let f = field_from(field)?;
         with_sim!(&s.sim, m => {
-            let need = f.components(m.grid().cells.len()) * m.particle_count();
+            let need = f.components(m.grid().cells().len()) * m.particle_count();
             if len < need {
                 return Err(Failure::new(
                     RKMPM_ERR_BUFFER_TOO_SMALL,

@@ -219,7 +219,7 @@ fn validate(scene: &Scene) -> Result<(SceneSim, Option<(Scene, SceneSim)>), Stri
                 )
             }
             SceneSim::D3(m) => {
-                let (lo, hi) = (m.grid().origin[1], m.grid().upper()[1]);
+                let (lo, hi) = (m.grid().origin()[1], m.grid().upper()[1]);
                 if !(lo..=hi).contains(&y) {
                     return Err(format!(
                         "run.section = {y:e}: the plane y = {y:e} m lies outside the grid \
@@ -252,12 +252,12 @@ fn describe<const D: usize>(scene: &Scene, sim: &Sim<D>) {
     println!("scene: {}", scene.title);
     println!(
         "{D}D, grid {} cells of {:e} m, {} particles, {} material{}; {}, {}",
-        g.cells
+        g.cells()
             .iter()
             .map(|c| c.to_string())
             .collect::<Vec<_>>()
             .join(" x "),
-        g.cell_size,
+        g.cell_size(),
         sim.particle_count(),
         sim.materials().len(),
         if sim.materials().len() == 1 { "" } else { "s" },
@@ -681,7 +681,7 @@ fn summary<const D: usize>(
         Ok(b) => {
             // Without plasticity or damage the stress work less the stored energy's change is
             // the time integration's error, not a dissipation of the material's.
-            let material = match ps.history.is_empty() {
+            let material = match ps.history().is_empty() {
                 true => format!(
                     "stress work less the stored energy {:.4e} (elastic: the time \
                      integration's error)",
@@ -713,15 +713,15 @@ fn summary<const D: usize>(
         ),
     }
     let largest = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-    if !ps.history.is_empty() {
-        let plastic: Vec<f64> = ps.history.iter().map(|s| s.plastic_strain).collect();
+    if !ps.history().is_empty() {
+        let plastic: Vec<f64> = ps.history().iter().map(|s| s.plastic_strain).collect();
         // Damage only where a material has it (Johnson–Cook), not for soil.
         let damages = sim
             .materials()
             .iter()
             .any(|m| matches!(m, rkmpm::material::Material::JohnsonCook(_)));
         if damages {
-            let damage: Vec<f64> = ps.history.iter().map(|s| s.damage).collect();
+            let damage: Vec<f64> = ps.history().iter().map(|s| s.damage).collect();
             println!(
                 "largest plastic strain {:.3}, largest damage {:.3}, failed particles {}",
                 largest(&plastic),
@@ -734,7 +734,7 @@ fn summary<const D: usize>(
     }
     println!(
         "largest pressure at the end: {:.4e} Pa",
-        ps.pressure
+        ps.pressure()
             .iter()
             .copied()
             .fold(f64::NEG_INFINITY, f64::max)

@@ -772,8 +772,8 @@ impl BodySpec {
         // cut off would be lost silently.
         let grid = sim.grid();
         let (shape, lo, hi) = bounds;
-        let (origin, upper) = (grid.origin, grid.upper());
-        let slack = 1e-9 * grid.cell_size;
+        let (origin, upper) = (grid.origin(), grid.upper());
+        let slack = 1e-9 * grid.cell_size();
         for a in (0..D).filter(|_| !self.clip) {
             let (below, above) = (origin[a] - lo[a], hi[a] - upper[a]);
             if below > slack || above > slack {
@@ -794,8 +794,8 @@ impl BodySpec {
                 "particles_per_cell must lie in 1..=8, got {n}"
             )));
         }
-        let q = grid.cell_size / n as f64;
-        let counts: [usize; D] = std::array::from_fn(|a| grid.cells[a] * n);
+        let q = grid.cell_size() / n as f64;
+        let counts: [usize; D] = std::array::from_fn(|a| grid.cells()[a] * n);
         let total: usize = counts.iter().product();
         let mut x = Vec::new();
         for k in 0..total {
@@ -803,7 +803,7 @@ impl BodySpec {
             let p = Vector::<D>::from_fn(|a, _| {
                 let i = r % counts[a];
                 r /= counts[a];
-                grid.origin[a] + (i as f64 + 0.5) * q
+                grid.origin()[a] + (i as f64 + 0.5) * q
             });
             if inside(&p) {
                 x.push(p);

@@ -29,8 +29,11 @@ pub const FIELDS: [&str; 10] = [
 /// field no material of the run has (plastic strain, damage) rather than draw zeros.
 pub fn values<const D: usize>(sim: &Sim<D>, name: &str) -> Result<(Vec<f64>, String), String> {
     if name == "material" {
-        let m = sim.particles().material;
-        return Ok((m.iter().map(|&k| k as f64).collect(), "material id".into()));
+        let ps = sim.particles();
+        return Ok((
+            ps.material().iter().map(|&k| k as f64).collect(),
+            "material id".into(),
+        ));
     }
     let field = Field::ALL
         .iter()
@@ -114,7 +117,8 @@ pub fn drawn<const D: usize>(
 ) -> Result<(Drawn<D>, String), String> {
     let (v, label) = values(sim, field)?;
     // Positions in id order, as the values.
-    let x = sim.particles().position;
+    let ps = sim.particles();
+    let x = ps.position();
     let id: Vec<usize> = (0..x.len()).filter(|&p| cut.holds(&x[p])).collect();
     if id.is_empty() && !x.is_empty() {
         let (lo, hi) = extremes(&x.iter().map(|p| p[1]).collect::<Vec<_>>());
@@ -219,10 +223,10 @@ impl Section {
         for sim in runs {
             let ps = sim.particles();
             for p in 0..ps.len() {
-                lo = lo.min(ps.position[p][1]);
-                hi = hi.max(ps.position[p][1]);
-                volume +=
-                    ps.reference_volume[p] * rkmpm::determinant(&ps.deformation_gradient[p]).abs();
+                lo = lo.min(ps.position()[p][1]);
+                hi = hi.max(ps.position()[p][1]);
+                volume += ps.reference_volume()[p]
+                    * rkmpm::determinant(&ps.deformation_gradient()[p]).abs();
                 count += 1;
             }
         }
@@ -296,7 +300,7 @@ pub fn write_panels<const D: usize>(
     let (a, b) = (0, D - 1);
     let cell = runs
         .iter()
-        .map(|(s, _)| s.grid().cell_size)
+        .map(|(s, _)| s.grid().cell_size())
         .fold(0.0, f64::max);
     let range = |axis: usize| {
         let (lo, hi) = runs
@@ -371,7 +375,8 @@ pub fn write_panels<const D: usize>(
             .y_desc(format!("{} (m)", axes[b]))
             .draw()
             .map_err(|e| fail(Box::new(e)))?;
-        let dot = ((panel as f64 * sim.grid().cell_size / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
+        let dot =
+            ((panel as f64 * sim.grid().cell_size() / (x1 - x0)) / 4.0).clamp(1.0, 6.0) as i32;
         chart
             .draw_series(
                 x.iter().zip(v).map(|(p, &c)| {

@@ -21,9 +21,9 @@ pub use shared::{scatter_add, NodeList, NodeScatter, SharedSlice};
 /// Geometry of the background grid. Nodes have integer indices `-ghost ..= cells + ghost` per axis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Grid<const D: usize> {
-    pub origin: Vector<D>,
-    pub cell_size: f64,
-    pub cells: [usize; D],
+    pub(crate) origin: Vector<D>,
+    pub(crate) cell_size: f64,
+    pub(crate) cells: [usize; D],
     ghost: usize,
     /// Nodes per axis including ghost layers.
     dims: [usize; D],
@@ -61,6 +61,21 @@ impl<const D: usize> Grid<D> {
         };
         g.set_ghost_layers(0)?;
         Ok(g)
+    }
+
+    /// The lower corner of the domain.
+    pub fn origin(&self) -> Vector<D> {
+        self.origin
+    }
+
+    /// The cells' edge length.
+    pub fn cell_size(&self) -> f64 {
+        self.cell_size
+    }
+
+    /// The cells per axis.
+    pub fn cells(&self) -> [usize; D] {
+        self.cells
     }
 
     /// Sets the number of ghost node layers (chosen from the shape function's support).

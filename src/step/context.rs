@@ -27,7 +27,7 @@ pub struct Workspace<const D: usize> {
     pub quadratic: TensorStencils<D, 3>,
     pub cubic: TensorStencils<D, 4>,
     /// Buffers of the particles' sort.
-    pub spare: crate::particles::SpareArrays<D>,
+    pub(crate) spare: crate::particles::SpareArrays<D>,
     /// How the step being taken stores its particles in block order (decided with its bins).
     pub reorder: Reorder,
     /// Permute every quantity at the commit even under USL (tests compare the two ways).

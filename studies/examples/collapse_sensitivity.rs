@@ -145,12 +145,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let law = NGUYEN_BUI_FUKAGAWA.runout(a);
         let h_law = NGUYEN_BUI_FUKAGAWA.final_height(a);
         let ratio = |x: f64| law.map_or("–".into(), |l| format!("{:.3}", x / l));
-        let q = sim.grid().cell_size / 2.0;
+        let q = sim.grid().cell_size() / 2.0;
         // The soil's particles only (a gate is material 1).
         let ps = sim.particles();
         let soil: Vec<_> = (0..ps.len())
-            .filter(|&p| ps.material[p] == 0)
-            .map(|p| ps.position[p])
+            .filter(|&p| ps.material()[p] == 0)
+            .map(|p| ps.position()[p])
             .collect();
         let thick_runouts: Vec<f64> = thick
             .iter()

@@ -426,17 +426,17 @@ fn motion<const D: usize>(sim: &Sim<D>, radius: f64) -> (f64, f64, f64, usize) {
     let ps = sim.particles();
     let (mut projectile, mut under, mut failed) = ([0.0; 2], [0.0; 2], 0);
     for p in 0..ps.len() {
-        let sum = if ps.material[p] == 1 {
+        let sum = if ps.material()[p] == 1 {
             &mut projectile
         } else {
-            failed += usize::from(ps.history[p].damage >= 1.0);
-            if ps.reference_position[p].rows(0, D - 1).norm() >= radius {
+            failed += usize::from(ps.history()[p].damage >= 1.0);
+            if ps.reference_position()[p].rows(0, D - 1).norm() >= radius {
                 continue;
             }
             &mut under
         };
-        sum[0] -= ps.mass[p] * ps.velocity[p][D - 1];
-        sum[1] += ps.mass[p];
+        sum[0] -= ps.mass()[p] * ps.velocity()[p][D - 1];
+        sum[1] += ps.mass()[p];
     }
     (
         sim.time(),

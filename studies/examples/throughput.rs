@@ -365,9 +365,9 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
     }
     let ps = sim.particles();
     let ke: f64 = ps
-        .mass
+        .mass()
         .iter()
-        .zip(&ps.velocity)
+        .zip(ps.velocity())
         .map(|(m, v)| 0.5 * m * v.norm_squared())
         .sum();
     let transfer_name = match transfer {

@@ -46,7 +46,7 @@ fn gap(shape: Shape, wall: Wall, start: f64) -> Result<f64, String> {
     }
     let lowest = sim
         .particles()
-        .position
+        .position()
         .iter()
         .map(|p| p[1])
         .fold(f64::INFINITY, f64::min);

@@ -410,13 +410,13 @@ pub fn mms_errors<const D: usize>(mms: &AxisAlignedMms, sim: &Sim<D>, t: f64) ->
     let ps = sim.particles();
     let (mut e2, mut u2, mut f2, mut g2) = (0.0, 0.0, 0.0, 0.0);
     for p in 0..ps.len() {
-        let x0 = ps.reference_position[p];
-        let v0 = ps.reference_volume[p];
+        let x0 = ps.reference_position()[p];
+        let v0 = ps.reference_volume()[p];
         let u = mms.displacement(&x0, t);
         let f = mms.deformation_gradient(&x0, t);
-        e2 += (ps.position[p] - x0 - u).norm_squared() * v0;
+        e2 += (ps.position()[p] - x0 - u).norm_squared() * v0;
         u2 += u.norm_squared() * v0;
-        f2 += (ps.deformation_gradient[p] - f).norm_squared() * v0;
+        f2 += (ps.deformation_gradient()[p] - f).norm_squared() * v0;
         g2 += (f - Matrix::<D>::identity()).norm_squared() * v0;
     }
     Errors {
@@ -812,17 +812,17 @@ impl SelfWeightColumn {
         let (mut e2, mut s2, mut pe2, mut p2) = (0.0, 0.0, 0.0, 0.0);
         let mut profile = Vec::new();
         for p in 0..ps.len() {
-            let y0 = ps.reference_position[p][1];
-            let v0 = ps.reference_volume[p];
+            let y0 = ps.reference_position()[p][1];
+            let v0 = ps.reference_volume()[p];
             let exact = -self.density * self.gravity * (self.height - y0);
-            let s = ps.stress[p][(1, 1)];
+            let s = ps.stress()[p][(1, 1)];
             e2 += (s - exact).powi(2) * v0;
             s2 += exact * exact * v0;
             let pex = self.exact_pressure(y0);
-            pe2 += (ps.pressure[p] - pex).powi(2) * v0;
+            pe2 += (ps.pressure()[p] - pex).powi(2) * v0;
             p2 += pex * pex * v0;
             if p % (2 * width) == width {
-                profile.push((y0, s, ps.pressure[p]));
+                profile.push((y0, s, ps.pressure()[p]));
             }
         }
         Ok(ColumnRun {

@@ -69,10 +69,10 @@ fn a_gate_that_clears_at_once_changes_nothing_and_a_slow_one_holds_the_column_ba
     }
     // The gate (material 1) is held with its lower edge GATE_CLEARANCE cells above the column.
     let ps = sim.particles();
-    let h = sim.grid().cell_size;
+    let h = sim.grid().cell_size();
     let lowest = (0..ps.len())
-        .filter(|&p| ps.material[p] == 1)
-        .map(|p| ps.position[p][1])
+        .filter(|&p| ps.material()[p] == 1)
+        .map(|p| ps.position()[p][1])
         .fold(f64::INFINITY, f64::min);
     // It starts a quarter cell above the floor and stops at the first step past the time it
     // takes to rise H0 + GATE_CLEARANCE h, overshooting by at most one step's 1 m/s × dt

@@ -81,7 +81,7 @@ fn plane_strain_penetration_perforates_fast_and_stops_slow() {
             cells_through_plate: 6,
             ..Default::default()
         };
-        let mass0: f64 = scene.build::<2>().unwrap().particles().mass.iter().sum();
+        let mass0: f64 = scene.build::<2>().unwrap().particles().mass().iter().sum();
         let (r, sim) = scene.run_observed::<2>(0, |_| Ok(())).unwrap();
         eprintln!("{r:?}");
         assert_eq!(r.perforated, through, "{v} m/s");
@@ -91,8 +91,8 @@ fn plane_strain_penetration_perforates_fast_and_stops_slow() {
         }
         assert!(r.max_damage <= 1.0 && r.failed_particles > 0);
         let ps = sim.particles();
-        assert!(ps.history.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
-        assert_eq!(ps.mass.iter().sum::<f64>(), mass0);
+        assert!(ps.history().iter().all(|s| (0.0..=1.0).contains(&s.damage)));
+        assert_eq!(ps.mass().iter().sum::<f64>(), mass0);
     }
 }
 
@@ -119,5 +119,5 @@ fn regularized_damage_shears_out_a_plug_on_coarse_cells() {
     assert!((0.8..2.5).contains(&r.separated_mass), "{r:?}");
     assert!(r.residual_speed > 0.0 && r.residual_speed < 300.0, "{r:?}");
     let ps = sim.particles();
-    assert!(ps.history.iter().all(|s| (0.0..=1.0).contains(&s.damage)));
+    assert!(ps.history().iter().all(|s| (0.0..=1.0).contains(&s.damage)));
 }

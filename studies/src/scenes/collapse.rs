@@ -231,8 +231,8 @@ impl GranularColumn {
         let t_end = self.duration * (h0 / self.gravity).sqrt();
         let ps = sim.particles();
         let mass0: f64 = (0..ps.len())
-            .filter(|&p| ps.material[p] == 0)
-            .map(|p| ps.mass[p])
+            .filter(|&p| ps.material()[p] == 0)
+            .map(|p| ps.mass()[p])
             .sum();
         let mut lift = self.gate_lifted_at();
         let mut hold_the_gate = |sim: &mut Sim<2>| {
@@ -250,17 +250,17 @@ impl GranularColumn {
             &mut on_frame,
             &mut hold_the_gate,
         )?;
-        let q = sim.grid().cell_size / 2.0;
+        let q = sim.grid().cell_size() / 2.0;
         let ps = sim.particles();
         // The soil only (the gate, if any, is material 1).
-        let soil: Vec<usize> = (0..ps.len()).filter(|&p| ps.material[p] == 0).collect();
-        let position: Vec<Vector<2>> = soil.iter().map(|&p| ps.position[p]).collect();
+        let soil: Vec<usize> = (0..ps.len()).filter(|&p| ps.material()[p] == 0).collect();
+        let position: Vec<Vector<2>> = soil.iter().map(|&p| ps.position()[p]).collect();
         let runout = deposit_front(&position, q);
         let height = position.iter().map(|x| x[1]).fold(0.0, f64::max) + q / 2.0;
-        let mass: f64 = soil.iter().map(|&p| ps.mass[p]).sum();
+        let mass: f64 = soil.iter().map(|&p| ps.mass()[p]).sum();
         let kinetic: f64 = soil
             .iter()
-            .map(|&p| 0.5 * ps.mass[p] * ps.velocity[p].norm_squared())
+            .map(|&p| 0.5 * ps.mass()[p] * ps.velocity()[p].norm_squared())
             .sum();
         let Material::DruckerPrager(dp) = sim.materials()[0] else {
             unreachable!("the column is Drucker–Prager")
@@ -268,9 +268,9 @@ impl GranularColumn {
         let worst_yield = soil
             .iter()
             .map(|&p| {
-                let j = rkmpm::determinant(&ps.deformation_gradient[p]);
-                let mut tau = rkmpm::material::embed3(&ps.stress[p]) * j;
-                tau[(2, 2)] = out_of_plane_stress(&ps.stress[p], ps.pressure[p]) * j;
+                let j = rkmpm::determinant(&ps.deformation_gradient()[p]);
+                let mut tau = rkmpm::material::embed3(&ps.stress()[p]) * j;
+                tau[(2, 2)] = out_of_plane_stress(&ps.stress()[p], ps.pressure()[p]) * j;
                 dp.yield_function(&tau.symmetric_eigenvalues()) / dp.elastic.young
             })
             .fold(f64::NEG_INFINITY, f64::max);

@@ -129,10 +129,10 @@ impl VibratingBar {
 /// Mass-weighted mean x-velocity of the particles.
 pub fn mean_axial_velocity<const D: usize>(sim: &Sim<D>) -> f64 {
     let ps = sim.particles();
-    let m: f64 = ps.mass.iter().sum();
-    ps.mass
+    let m: f64 = ps.mass().iter().sum();
+    ps.mass()
         .iter()
-        .zip(&ps.velocity)
+        .zip(ps.velocity())
         .map(|(m, v)| m * v[0])
         .sum::<f64>()
         / m
@@ -158,11 +158,11 @@ pub fn run_vibrating_bar<const D: usize>(
 ) -> Result<BarResult> {
     let period = bar.period();
     let ps = sim.particles();
-    let m_total: f64 = ps.mass.iter().sum();
+    let m_total: f64 = ps.mass().iter().sum();
     let shape_mean = ps
-        .mass
+        .mass()
         .iter()
-        .zip(&ps.reference_position)
+        .zip(ps.reference_position())
         .map(|(m, x)| m * (bar.beta() * x[0]).sin())
         .sum::<f64>()
         / m_total;

@@ -18,7 +18,7 @@ use rkmpm::material::{JohnsonCookParameters, Material};
 use rkmpm::options::{Integration, Shape, Side, Transfer, Wall};
 use rkmpm::particles::Particles;
 use rkmpm::sim::Sim;
-use rkmpm::Vector;
+use rkmpm::{Matrix, Vector};
 use std::collections::HashMap;
 
 /// The scene; lengths in m.
@@ -200,8 +200,8 @@ impl Penetration {
     ) -> Result<(PenetrationResult, Sim<D>)> {
         let mut sim = self.build::<D>()?;
         let mut near_bottom = |sim: &mut Sim<D>| {
-            let floor = 2.0 * sim.grid().cell_size;
-            Ok(sim.particles().position.iter().any(|x| x[D - 1] < floor))
+            let floor = 2.0 * sim.grid().cell_size();
+            Ok(sim.particles().position().iter().any(|x| x[D - 1] < floor))
         };
         let seconds = super::run_with_frames(
             &mut sim,
@@ -213,18 +213,23 @@ impl Penetration {
         )?;
         let back = self.space_below * self.plate_thickness;
         let ps = sim.particles();
-        let h = sim.grid().cell_size;
-        let joined = joined_to_the_clamp(&ps, 0, h / 2.0, self.plate_half_width - h / 2.0);
+        let h = sim.grid().cell_size();
+        let joined = joined_to_the_clamp(
+            &PlatePoints::from(&ps),
+            0,
+            h / 2.0,
+            self.plate_half_width - h / 2.0,
+        );
         let across = |x: &Vector<D>| x.rows(0, D - 1).norm();
         let (mut vsum, mut msum, mut lowest) = (0.0, 0.0, f64::INFINITY);
         let (mut failed, mut max_damage) = (0, 0.0f64);
         for p in 0..ps.len() {
-            if ps.material[p] == 1 {
-                vsum -= ps.mass[p] * ps.velocity[p][D - 1];
-                msum += ps.mass[p];
-                lowest = lowest.min(ps.position[p][D - 1]);
+            if ps.material()[p] == 1 {
+                vsum -= ps.mass()[p] * ps.velocity()[p][D - 1];
+                msum += ps.mass()[p];
+                lowest = lowest.min(ps.position()[p][D - 1]);
             } else {
-                let d = ps.history[p].damage;
+                let d = ps.history()[p].damage;
                 max_damage = max_damage.max(d);
                 failed += usize::from(d >= 1.0);
             }
@@ -232,17 +237,17 @@ impl Penetration {
         // Plate material joined to the clamp in the projectile's path, below its nose.
         let blocked = (0..ps.len()).any(|p| {
             joined[p]
-                && across(&ps.position[p]) < self.projectile_radius
-                && ps.position[p][D - 1] < lowest
+                && across(&ps.position()[p]) < self.projectile_radius
+                && ps.position()[p][D - 1] < lowest
         });
         let plate_mass = |keep: &dyn Fn(usize) -> bool| -> f64 {
             (0..ps.len())
-                .filter(|&p| ps.material[p] == 0 && keep(p))
+                .filter(|&p| ps.material()[p] == 0 && keep(p))
                 // From +0 (an empty `sum` of f64 is −0).
-                .fold(0.0, |total, p| total + ps.mass[p])
+                .fold(0.0, |total, p| total + ps.mass()[p])
         };
         let separated_mass = plate_mass(&|p| !joined[p])
-            / plate_mass(&|p| across(&ps.reference_position[p]) < self.projectile_radius);
+            / plate_mass(&|p| across(&ps.reference_position()[p]) < self.projectile_radius);
         let result = PenetrationResult {
             impact_speed: self.impact_speed,
             residual_speed: vsum / msum,
@@ -281,19 +286,53 @@ pub fn recht_ipson_fit(runs: &[(f64, f64)]) -> Option<(f64, f64)> {
     Some((slope.sqrt(), (-intercept / slope).max(0.0).sqrt()))
 }
 
+/// What [`joined_to_the_clamp`] reads of each particle, in id order.
+#[derive(Debug, Clone)]
+pub struct PlatePoints<const D: usize> {
+    pub position: Vec<Vector<D>>,
+    pub reference_position: Vec<Vector<D>>,
+    pub deformation_gradient: Vec<Matrix<D>>,
+    pub material: Vec<u32>,
+    /// Johnson–Cook damage (1 = failed).
+    pub damage: Vec<f64>,
+}
+
+impl<const D: usize> From<&Particles<D>> for PlatePoints<D> {
+    fn from(ps: &Particles<D>) -> Self {
+        PlatePoints {
+            position: ps.position().to_vec(),
+            reference_position: ps.reference_position().to_vec(),
+            deformation_gradient: ps.deformation_gradient().to_vec(),
+            material: ps.material().to_vec(),
+            damage: (0..ps.len())
+                .map(|p| ps.history().get(p).map_or(0.0, |h| h.damage))
+                .collect(),
+        }
+    }
+}
+
+impl<const D: usize> PlatePoints<D> {
+    pub fn len(&self) -> usize {
+        self.position.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.position.is_empty()
+    }
+}
+
 /// Which particles of material `plate` are joined to its clamped edge (reference distance from
 /// the shot line at least `clamp`) through intact material: two intact (`D < 1`) plate particles
 /// are joined when their current distance is below 1.5 times `spacing` (the lattice spacing)
 /// times the larger stretch (largest singular value of `F`) of the two, so material that
 /// stretches without failing stays joined. Failed particles carry no tension and join nothing.
 pub fn joined_to_the_clamp<const D: usize>(
-    ps: &Particles<D>,
+    ps: &PlatePoints<D>,
     plate: u32,
     spacing: f64,
     clamp: f64,
 ) -> Vec<bool> {
     let intact: Vec<usize> = (0..ps.len())
-        .filter(|&p| ps.material[p] == plate && ps.history[p].damage < 1.0)
+        .filter(|&p| ps.material[p] == plate && ps.damage[p] < 1.0)
         .collect();
     let stretch = |p: usize| {
         let f = rkmpm::material::embed3(&ps.deformation_gradient[p]);
@@ -383,8 +422,8 @@ mod tests {
             let sim = scene.build::<2>().unwrap();
             let ps = sim.particles();
             let lowest = (0..ps.len())
-                .filter(|&p| ps.material[p] == 0)
-                .map(|p| ps.position[p][1])
+                .filter(|&p| ps.material()[p] == 0)
+                .map(|p| ps.position()[p][1])
                 .fold(f64::INFINITY, f64::min);
             let q = scene.plate_thickness / 8.0;
             let back = space_below * scene.plate_thickness;
@@ -409,11 +448,11 @@ mod tests {
             ..Default::default()
         };
         let sim = scene.build::<2>().unwrap();
-        let q = sim.grid().cell_size / 2.0;
+        let q = sim.grid().cell_size() / 2.0;
         let clamp = scene.plate_half_width - q;
         let r = scene.projectile_radius;
-        let intact = sim.particles();
-        let plate = |ps: &Particles<2>| (0..ps.len()).filter(|&p| ps.material[p] == 0).count();
+        let intact = PlatePoints::from(&sim.particles());
+        let plate = |ps: &PlatePoints<2>| (0..ps.len()).filter(|&p| ps.material[p] == 0).count();
         let count = |joined: &[bool], inside: bool| {
             (0..intact.len())
                 .filter(|&p| {
@@ -432,12 +471,10 @@ mod tests {
         let mut cut = intact.clone();
         for p in 0..cut.len() {
             if cut.material[p] == 0 && (cut.reference_position[p][0] - r).abs() < q / 2.0 {
-                cut.history[p].damage = 1.0;
+                cut.damage[p] = 1.0;
             }
         }
-        let band = (0..cut.len())
-            .filter(|&p| cut.history[p].damage >= 1.0)
-            .count();
+        let band = (0..cut.len()).filter(|&p| cut.damage[p] >= 1.0).count();
         assert_eq!(band, 8, "one column through the plate");
         for (ps, what) in [
             (cut.clone(), "cut"),
@@ -456,16 +493,16 @@ mod tests {
     }
 
     /// Plate particles inside the shot line's radius `r` (reference), not failed.
-    fn count_inside(ps: &Particles<2>, r: f64) -> usize {
+    fn count_inside(ps: &PlatePoints<2>, r: f64) -> usize {
         (0..ps.len())
             .filter(|&p| {
-                ps.material[p] == 0 && ps.history[p].damage < 1.0 && ps.reference_position[p][0] < r
+                ps.material[p] == 0 && ps.damage[p] < 1.0 && ps.reference_position[p][0] < r
             })
             .count()
     }
 
     /// The particles stretched `s` times across (positions and `F`).
-    fn stretched(ps: &Particles<2>, s: f64) -> Particles<2> {
+    fn stretched(ps: &PlatePoints<2>, s: f64) -> PlatePoints<2> {
         let mut ps = ps.clone();
         for p in 0..ps.len() {
             ps.position[p][0] *= s;

@@ -176,11 +176,11 @@ impl TaylorBar {
             &mut on_frame,
             &mut |_| Ok(false),
         )?;
-        let q = sim.grid().cell_size / 2.0;
+        let q = sim.grid().cell_size() / 2.0;
         let ps = sim.particles();
-        let final_length = ps.position.iter().map(|x| x[2]).fold(0.0, f64::max) + q / 2.0;
+        let final_length = ps.position().iter().map(|x| x[2]).fold(0.0, f64::max) + q / 2.0;
         let foot_radius = ps
-            .position
+            .position()
             .iter()
             .filter(|x| x[2] < q)
             .map(|x| x[0].hypot(x[1]))
@@ -193,7 +193,7 @@ impl TaylorBar {
             reference_length,
             reference_radius,
             max_plastic_strain: ps
-                .history
+                .history()
                 .iter()
                 .map(|s| s.plastic_strain)
                 .fold(0.0, f64::max),
