@@ -1,4 +1,4 @@
-//! Nothing a caller passes can hang the host (issue 64): materials outside any physical range
+//! Nothing a caller passes can hang the host: materials outside any physical range
 //! are refused when they are made, each with its reason, and an adaptive run above the bound on
 //! its steps is refused before its first step (or stopped at the bound when its stable step
 //! shrinks on the way), keeping the last good state.
@@ -131,7 +131,7 @@ fn materials_outside_any_physical_range_are_refused_with_their_reason() {
         assert!(e.message.contains(reason), "{} lacks {reason:?}", e.message);
     };
     let too_fast = "exceeds 1e5 m/s";
-    // Issue 64's material: E = 1e300 Pa, a wave speed of 3.7e148 m/s.
+    // E = 1e300 Pa: a wave speed of 3.7e148 m/s.
     refused(Material::neo_hookean(1000.0, 1e300, 0.3), too_fast);
     refused(Material::linear_elastic(1000.0, 1e300, 0.3), too_fast);
     refused(

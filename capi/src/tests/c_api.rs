@@ -1181,8 +1181,8 @@ fn particles_come_back_in_the_order_they_were_added() {
     }
 }
 
-/// Issue 64: a material with E = 1e300 Pa was accepted and `rkmpm_sim_advance` then set out on
-/// 1e147 steps. Such a material is refused with its reason, and a run above the bound on the
+/// A material with E = 1e300 Pa would have `rkmpm_sim_advance` set out on 1e147 steps. Such a
+/// material is refused with its reason, and a run above the bound on the
 /// steps of one advance is refused before its first step with the estimate in the message;
 /// both leave the simulation as it was.
 #[test]
