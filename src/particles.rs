@@ -1,6 +1,6 @@
 //! Material points, stored as a structure of arrays (one `Vec` per quantity).
 //!
-//! The step keeps the storage sorted by grid block ([`Particles::permute`]), so a particle's
+//! The step keeps the storage sorted by grid block (`Particles::permute`), so a particle's
 //! place in these arrays (its *slot*) changes; its *id*, the index it was added with, does
 //! not. What the API hands out is in id order, and only that: `Sim::particles` (a copy in id
 //! order), [`Particles::write_field`], the C API's arrays, the VTK files, the pictures, the
