@@ -319,27 +319,15 @@ impl DruckerPrager {
         dt: f64,
     ) -> (History, Matrix3<f64>) {
         let fe = df * state.elastic_deformation;
-        let (fe_new, eps, eps_new, sigma) = match plane_strain_hencky(&fe) {
-            Some((u, eps)) => {
-                // `F_e = U Σ Vᵀ` with `Vᵀ = Σ⁻¹ Uᵀ F_e`: the new `F_e = U diag(e^ε' / e^ε) Uᵀ F_e`.
-                let eps_new = self.return_map_over(&eps, dt);
-                let tau = self.principal_stress(&eps_new);
-                let scale = (eps_new - eps).map(f64::exp);
-                let fe_new = u * Matrix3::from_diagonal(&scale) * u.transpose() * fe;
-                let sigma = u * Matrix3::from_diagonal(&tau) * u.transpose() / j;
-                (fe_new, eps, eps_new, sigma)
-            }
-            None => {
-                let svd = fe.svd(true, true);
-                let (u, vt) = (svd.u.expect("U"), svd.v_t.expect("Vᵀ"));
-                let eps = svd.singular_values.map(|s| s.ln());
-                let eps_new = self.return_map_over(&eps, dt);
-                let tau = self.principal_stress(&eps_new);
-                let fe_new = u * Matrix3::from_diagonal(&eps_new.map(f64::exp)) * vt;
-                let sigma = u * Matrix3::from_diagonal(&tau) * u.transpose() / j;
-                (fe_new, eps, eps_new, sigma)
-            }
+        let (u, eps, vt) = hencky_frame(&fe, true);
+        let eps_new = self.return_map_over(&eps, dt);
+        let tau = self.principal_stress(&eps_new);
+        let fe_new = match vt {
+            Some(vt) => u * Matrix3::from_diagonal(&eps_new.map(f64::exp)) * vt,
+            // `F_e = U Σ Vᵀ` with `Vᵀ = Σ⁻¹ Uᵀ F_e`: the new `F_e = U diag(e^ε' / e^ε) Uᵀ F_e`.
+            None => u * Matrix3::from_diagonal(&(eps_new - eps).map(f64::exp)) * u.transpose() * fe,
         };
+        let sigma = u * Matrix3::from_diagonal(&tau) * u.transpose() / j;
         let plastic = (2.0f64 / 3.0).sqrt() * (eps - eps_new).norm();
         (
             History {
@@ -353,17 +341,34 @@ impl DruckerPrager {
 
     /// Hencky Cauchy stress `U diag(λ tr ε + 2 μ ε) Uᵀ / j` of an elastic deformation `fe`.
     pub fn elastic_stress(&self, fe: &Matrix3<f64>, j: f64) -> Matrix3<f64> {
-        let svd = fe.svd(true, false);
-        let u = svd.u.expect("U");
-        let tau = self.principal_stress(&svd.singular_values.map(|s| s.ln()));
+        let (u, eps, _) = hencky_frame(fe, false);
+        let tau = self.principal_stress(&eps);
         u * Matrix3::from_diagonal(&tau) * u.transpose() / j
     }
 
     /// Hencky energy of the elastic part `F_e` per unit reference volume.
     pub fn elastic_energy(&self, fe: &Matrix3<f64>) -> f64 {
-        let eps = fe.svd(false, false).singular_values.map(|s| s.ln());
+        let eps = match plane_strain_hencky(fe) {
+            Some((_, eps)) => eps,
+            None => fe.svd(false, false).singular_values.map(|s| s.ln()),
+        };
         0.5 * self.elastic.lambda * eps.sum().powi(2) + self.elastic.mu * eps.norm_squared()
     }
+}
+
+/// `F_e`'s left singular vectors `U` and logarithmic principal strains `ε = ln Σ`: in closed form
+/// in plane strain ([`plane_strain_hencky`], `Vᵀ` not given), else by the SVD (with `Vᵀ` when
+/// `with_vt`).
+fn hencky_frame(
+    fe: &Matrix3<f64>,
+    with_vt: bool,
+) -> (Matrix3<f64>, Vector3<f64>, Option<Matrix3<f64>>) {
+    if let Some((u, eps)) = plane_strain_hencky(fe) {
+        return (u, eps, None);
+    }
+    let svd = fe.svd(true, with_vt);
+    let eps = svd.singular_values.map(|s| s.ln());
+    (svd.u.expect("U"), eps, svd.v_t)
 }
 
 /// The left singular vectors `U` and logarithmic principal strains `ε = ln Σ` of a plane-strain
