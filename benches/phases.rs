@@ -193,6 +193,7 @@ fn phases<const D: usize>(c: &mut Criterion, m: usize) {
                 positions: ps.position(),
                 volumes: &volumes,
                 stencils: &stored,
+                tensor: None,
                 boundary: &boundary,
                 boundary_stencils: &boundary_stencils,
                 body: None,

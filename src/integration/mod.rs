@@ -90,7 +90,7 @@ pub use boundary_points::BoundaryPoints;
 
 use crate::error::{Error, Result};
 use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
-use crate::shape::{Monomials, Stencils};
+use crate::shape::{Monomials, Stencils, TensorFactors};
 use crate::{Matrix, Vector};
 use nalgebra::{DMatrix, DVectorViewMut};
 use node_operator::{Multilevel, NodeOperator, OperatorStorage};
@@ -297,6 +297,10 @@ pub struct VcInputs<'a, const D: usize> {
     pub positions: &'a [Vector<D>],
     pub volumes: &'a [f64],
     pub stencils: &'a Stencils<D>,
+    /// The same stencils as their 1D factors, when they are a tensor product
+    /// ([`crate::shape::StencilView::tensor_factors`]): the order-1 system is then assembled
+    /// per axis.
+    pub tensor: Option<TensorFactors<'a, D>>,
     /// The boundary points (under contact the body's own surface) and their stencils.
     pub boundary: &'a BoundaryPoints<D>,
     pub boundary_stencils: &'a Stencils<D>,
@@ -566,6 +570,7 @@ impl<const D: usize> VcCorrection<D> {
             boundary,
             boundary_stencils,
             body,
+            ..
         } = inputs;
         let m = self.m();
         let h = grid.cell_size;
@@ -737,6 +742,7 @@ impl<const D: usize> VcCorrection<D> {
             positions,
             volumes,
             stencils,
+            tensor,
             body,
             ..
         } = inputs;
@@ -855,6 +861,7 @@ impl<const D: usize> VcCorrection<D> {
                     q_of,
                     linear_fit.then_some(&frame_offset),
                     counted,
+                    tensor,
                     std::mem::take(&mut self.storage),
                 )
             })

@@ -107,6 +107,7 @@ fn correction<const D: usize>(
         positions: &ps.position,
         volumes,
         stencils: &work.stencils,
+        tensor: None,
         boundary: &sim.boundary,
         boundary_stencils: &work.boundary_stencils,
         body: None,

@@ -160,6 +160,57 @@ pub trait StencilView<const D: usize>: Sync {
     ) -> Gathered<D> {
         gather_node_by_node(self, grid, p, xp, v, v_old, affine, gradient)
     }
+
+    /// The stencils' 1D factors, when they are a tensor product stored as such (B-splines on
+    /// the lattice): sums over pairs of a stencil's nodes can then be formed per axis.
+    fn tensor_factors(&self) -> Option<TensorFactors<'_, D>> {
+        None
+    }
+}
+
+/// A tensor-product stencil as its 1D factors, without its width in the type: what VC's
+/// assembly reads ([`StencilView::tensor_factors`]). Particle `p`'s stencil is the box of
+/// `width^D` nodes from [`TensorFactors::base`], axis 0 fastest (the slot order of the stored
+/// lists), and its value at the node `k` of the box is `Π_a w_a[k_a]`, the product taken in
+/// ascending axis order as [`tensor_product`] takes it.
+#[derive(Debug, Clone, Copy)]
+pub struct TensorFactors<'a, const D: usize> {
+    /// Nodes per axis.
+    pub width: usize,
+    /// Storage steps of the node index along each axis.
+    pub strides: [usize; D],
+    zero_index: usize,
+    first: &'a [[i32; D]],
+    /// Per particle `D × width` values, axis by axis.
+    values: &'a [f64],
+    /// As `values`, the derivatives (per unit length); empty when not computed.
+    derivatives: &'a [f64],
+}
+
+impl<const D: usize> TensorFactors<'_, D> {
+    /// The storage index of particle `p`'s first stencil node.
+    #[inline(always)]
+    pub fn base(&self, p: usize) -> usize {
+        let mut n = self.zero_index as i64;
+        for (&i, &stride) in self.first[p].iter().zip(&self.strides) {
+            n += i64::from(i) * stride as i64;
+        }
+        n as usize
+    }
+
+    /// Particle `p`'s factors, `values[a · width + k]`.
+    #[inline(always)]
+    pub fn values(&self, p: usize) -> &[f64] {
+        let n = D * self.width;
+        &self.values[p * n..(p + 1) * n]
+    }
+
+    /// Particle `p`'s derivative factors, as [`TensorFactors::values`].
+    #[inline(always)]
+    pub fn derivatives(&self, p: usize) -> &[f64] {
+        let n = D * self.width;
+        &self.derivatives[p * n..(p + 1) * n]
+    }
 }
 
 /// The grid-to-particle sums of [`StencilView::gather`], node by node.
@@ -838,6 +889,17 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
         = Self
     where
         Self: 'a;
+
+    fn tensor_factors(&self) -> Option<TensorFactors<'_, D>> {
+        Some(TensorFactors {
+            width: W,
+            strides: self.strides,
+            zero_index: self.zero_index,
+            first: self.first,
+            values: self.values.as_flattened().as_flattened(),
+            derivatives: self.derivatives.as_flattened().as_flattened(),
+        })
+    }
 
     #[inline(always)]
     fn local(&self) -> Self {

@@ -53,6 +53,7 @@ pub(super) fn vc_per_body<const D: usize, S: StencilView<D>>(
             positions: &ps.position,
             volumes,
             stencils: inputs.stored.expect("VC runs with stored stencils"),
+            tensor: inputs.stencils.tensor_factors(),
             boundary: &surface,
             boundary_stencils,
             body: Some((&ps.material, b as u32)),

@@ -58,6 +58,7 @@ pub(super) fn boundary_and_corrections<const D: usize, S: StencilView<D>>(
             positions: &ps.position,
             volumes: &work.volumes,
             stencils: inputs.stored.expect("VC runs with stored stencils"),
+            tensor: inputs.stencils.tensor_factors(),
             boundary,
             boundary_stencils: &work.boundary_stencils,
             body: None,
