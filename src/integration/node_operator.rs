@@ -678,6 +678,20 @@ impl<const D: usize> NodeOperator<D> {
                     }
                 }
                 let mut k = 0;
+                if m == 1 {
+                    // The same as below with blocks of one value (no reduced rows).
+                    for e in 0..block {
+                        let b = row[e];
+                        if e != centre && b == 0.0 {
+                            continue;
+                        }
+                        row[k] = if e == centre { moment[slot] - b } else { -b };
+                        column[k] = nodes.slot((node + step[e]) as usize) as u32;
+                        k += 1;
+                    }
+                    *count = k as u32;
+                    return;
+                }
                 for e in 0..block {
                     if e != centre && row[e * mm..(e + 1) * mm].iter().all(|&x| x == 0.0) {
                         continue;
