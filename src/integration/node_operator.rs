@@ -1872,7 +1872,7 @@ mod tests {
     /// The order-1 operator with the mean fit assembled per axis from the stencils' 1D factors
     /// (`tensor_rows`) is the one assembled from the stored lists, to round-off: the same rows
     /// and columns, every value within 1e-14 of the largest (the sums are taken in another
-    /// order: measured 1e-16), and the same lattice neighbours joined. On jittered particles
+    /// order, a few units of the last place apart), and the same lattice neighbours joined. On jittered particles
     /// with a few put on node lines or half-way between nodes, where factors vanish (a support
     /// that is not the whole box: linear hats), for the linear, quadratic and cubic B-splines,
     /// 2D and 3D.
