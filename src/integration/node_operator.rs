@@ -40,7 +40,8 @@ const MAX_ASSEMBLED_VALUES: usize = 1 << 26;
 /// 1000 with four), and each pair of nodes reads its sum once per stencil: a particle costs
 /// `P^D` products where the pairs of nodes cost `W^{2D}` (81, 729, 4096). `keys` are the
 /// stencil slots' keys and storage steps, the block's centre and its size, as `assemble` forms
-/// them. Returns whether every particle's support is a box of nodes with positive weights.
+/// them; the rows go to `dense`. Clears `boxes` when a particle's support is not a box of nodes
+/// with positive weights.
 fn tensor_rows<const D: usize>(
     tensor: &TensorFactors<'_, D>,
     bins: &Bins<D>,
@@ -48,8 +49,8 @@ fn tensor_rows<const D: usize>(
     volumes: &[f64],
     counted: &(impl Fn(usize) -> bool + Sync),
     (box_key, box_step, centre, block): (&[isize], &[usize], usize, usize),
-    dense: &mut [f64],
-) -> bool {
+    (dense, boxes): (&mut [f64], &std::sync::atomic::AtomicBool),
+) {
     let w = tensor.width;
     let len = box_key.len();
     let pairs = w * (w + 1) / 2;
@@ -70,7 +71,6 @@ fn tensor_rows<const D: usize>(
         }
     }
     let sums = pairs.pow(D as u32);
-    let boxes = std::sync::atomic::AtomicBool::new(true);
     let rows = SharedSlice::new(dense);
     for colour in &bins.colours {
         colour.par_iter().for_each(|&b| {
@@ -152,9 +152,12 @@ fn tensor_rows<const D: usize>(
                 let mut size = 1;
                 for a in 0..D {
                     let f = &f[a * w..(a + 1) * w];
+                    // The pairs `i ≤ j` in the order `pair` numbers them.
+                    let mut t = 0;
                     for i in 0..w {
                         for j in i..w {
-                            factor_pairs[pair(i, j)] = f[i] * f[j];
+                            factor_pairs[t] = f[i] * f[j];
+                            t += 1;
                         }
                     }
                     if a + 1 == D {
@@ -179,7 +182,6 @@ fn tensor_rows<const D: usize>(
             }
         });
     }
-    boxes.into_inner()
 }
 
 /// At order ≥ 2, the particles of one bin whose stencils hold the same nodes (sorted by their
@@ -388,8 +390,8 @@ impl<const D: usize> NodeOperator<D> {
         let tensor = tensor.filter(|t| m == 1 && frame_offset.is_none() && t.width == width);
         if let Some(tensor) = tensor {
             let keys = (&box_key[..], &box_step[..], centre, block);
-            let all_boxes = tensor_rows(&tensor, bins, nodes, volumes, &counted, keys, &mut dense);
-            boxes.store(all_boxes, std::sync::atomic::Ordering::Relaxed);
+            let out = (&mut dense[..], &boxes);
+            tensor_rows(&tensor, bins, nodes, volumes, &counted, keys, out);
         } else {
             let rows = SharedSlice::new(&mut dense);
             for colour in &bins.colours {
