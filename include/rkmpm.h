@@ -50,6 +50,18 @@
 #define RKMPM_DEFAULT_VC_SURFACE_REFRESH 4
 
 /**
+ * Every how many steps VC's solve runs in a new simulation (`rkmpm_sim_set_vc_solve_interval`):
+ * at every step, but with RK shape functions at order 1 `RKMPM_RK_VC_SOLVE_INTERVAL`.
+ */
+#define RKMPM_DEFAULT_VC_SOLVE_INTERVAL 1
+
+/**
+ * Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
+ * the steps between taking the last solve's coefficients.
+ */
+#define RKMPM_RK_VC_SOLVE_INTERVAL 4
+
+/**
  * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
  */
 #define RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS 2000
@@ -894,6 +906,33 @@ enum RkmpmStatus rkmpm_sim_max_steps_per_advance(const struct RkmpmSim *sim,
 enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
                                         double tolerance,
                                         uint64_t max_iterations);
+
+/**
+ * Sets every how many steps VC's conservative solve runs (`RKMPM_INTEGRATION_VC`): every
+ * `steps` >= 1 steps, the steps between taking the last solve's coefficients, carried by grid
+ * node (the next solve starts from them); 1 solves at every step. Order 1 only, without
+ * contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
+ * Without it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but with
+ * RK shape functions at order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` (4) steps, the convergence
+ * study's errors within 0.5 % of a solve at every step (docs/convergence/FINDINGS.md; with
+ * B-splines a carried solve moves the energy-norm error by 1.7 % at fixed walls). Linear and
+ * angular momentum are conserved whatever the interval. Keeps the tolerance and the
+ * iteration bound in force (`rkmpm_sim_set_vc_solve`). May change between steps; part of a
+ * checkpoint, with the carried coefficients. A refused value changes nothing.
+ *
+ * # Safety
+ * `sim` must be a live handle.
+ */
+enum RkmpmStatus rkmpm_sim_set_vc_solve_interval(struct RkmpmSim *sim, uint32_t steps);
+
+/**
+ * Writes every how many steps VC's solve runs (`rkmpm_sim_set_vc_solve_interval`: the interval
+ * given, or the automatic rule's) to `*out_steps`.
+ *
+ * # Safety
+ * `sim` must be a live handle; `out_steps` valid for a write.
+ */
+enum RkmpmStatus rkmpm_sim_vc_solve_interval(const struct RkmpmSim *sim, uint32_t *out_steps);
 
 /**
  * Sets every how many steps VC finds the surface of the particles anew (VC without given

@@ -48,6 +48,11 @@ module rkmpm
    ! across (sim%vc_solve reports the rule in force).
    real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-4_c_double
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
+   ! Every how many steps VC's solve runs in a new simulation (sim%set_vc_solve_interval changes
+   ! it): every step, but with RK shape functions at order 1 RKMPM_RK_VC_SOLVE_INTERVAL steps,
+   ! the steps between taking the last solve's coefficients.
+   integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_INTERVAL = 1
+   integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 4
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4
@@ -235,6 +240,8 @@ module rkmpm
       procedure :: max_steps_per_advance => sim_max_steps_per_advance
       procedure :: set_vc_solve => sim_set_vc_solve
       procedure :: vc_solve => sim_vc_solve
+      procedure :: set_vc_solve_interval => sim_set_vc_solve_interval
+      procedure :: vc_solve_interval => sim_vc_solve_interval
       procedure :: set_vc_surface_refresh => sim_set_vc_surface_refresh
       procedure :: vc_surface_refresh => sim_vc_surface_refresh
       procedure :: set_threads => sim_set_threads
@@ -581,6 +588,23 @@ module rkmpm
          real(c_double), intent(out) :: out_tolerance
          integer(c_int64_t), intent(out) :: out_max_iterations
       end function rkmpm_sim_vc_solve
+
+      ! enum RkmpmStatus rkmpm_sim_set_vc_solve_interval(struct RkmpmSim *sim, uint32_t steps);
+      integer(c_int) function rkmpm_sim_set_vc_solve_interval(sim, steps) &
+            bind(C, name="rkmpm_sim_set_vc_solve_interval")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), value :: steps
+      end function rkmpm_sim_set_vc_solve_interval
+
+      ! enum RkmpmStatus rkmpm_sim_vc_solve_interval(const struct RkmpmSim *sim,
+      !                                              uint32_t *out_steps);
+      integer(c_int) function rkmpm_sim_vc_solve_interval(sim, out_steps) &
+            bind(C, name="rkmpm_sim_vc_solve_interval")
+         import :: c_int, c_ptr, c_int32_t
+         type(c_ptr), value :: sim
+         integer(c_int32_t), intent(out) :: out_steps
+      end function rkmpm_sim_vc_solve_interval
 
       ! enum RkmpmStatus rkmpm_sim_set_vc_surface_refresh(struct RkmpmSim *sim, uint32_t steps);
       integer(c_int) function rkmpm_sim_set_vc_surface_refresh(sim, steps) &
@@ -1399,6 +1423,37 @@ contains
       call report(rkmpm_sim_vc_solve(self%h, tolerance, max_iterations), 'vc_solve', stat, text)
       if (present(errmsg)) errmsg = text
    end subroutine sim_vc_solve
+
+   !> Every how many steps VC's solve runs (default every step, RKMPM_RK_VC_SOLVE_INTERVAL, 4,
+   !> with RK shape functions at order 1; order >= 2 and contact solve at every step): the steps
+   !> between take the last solve's coefficients, carried by grid node. Momentum is conserved
+   !> whatever the interval.
+   !> Keeps the tolerance and iteration bound in force. steps < 1 is refused. Part of a
+   !> checkpoint.
+   subroutine sim_set_vc_solve_interval(self, steps, stat, errmsg)
+      class(rkmpm_sim), intent(inout) :: self
+      integer(c_int32_t), intent(in) :: steps
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      ! C takes an unsigned count: a negative one is passed as 0, which C refuses.
+      call report(rkmpm_sim_set_vc_solve_interval(self%h, max(steps, 0_c_int32_t)), &
+         'set_vc_solve_interval', stat, text)
+      if (present(errmsg)) errmsg = text
+   end subroutine sim_set_vc_solve_interval
+
+   !> Every how many steps VC's solve runs (sim%set_vc_solve_interval).
+   integer(c_int32_t) function sim_vc_solve_interval(self, stat, errmsg)
+      class(rkmpm_sim), intent(in) :: self
+      integer(c_int), intent(out), optional :: stat
+      character(:), allocatable, intent(out), optional :: errmsg
+      character(:), allocatable :: text
+      integer(c_int32_t) :: n
+      n = 0
+      call report(rkmpm_sim_vc_solve_interval(self%h, n), 'vc_solve_interval', stat, text)
+      if (present(errmsg)) errmsg = text
+      sim_vc_solve_interval = n
+   end function sim_vc_solve_interval
 
    !> Every how many steps VC finds the surface of the particles anew (VC without given
    !> boundary points, without contact; default RKMPM_DEFAULT_VC_SURFACE_REFRESH, 4): the grid

@@ -1000,6 +1000,37 @@ static void lifetime_rows(void) {
     EXPECT(tolerance == 7.0 && iterations == 77, "wrote one output after a failure");
     drop(&f);
   }
+  ROW("set_vc_solve_interval.null_sim", RKMPM_ERR_NULL_POINTER) {
+    CALL(NULL, rkmpm_sim_set_vc_solve_interval(NULL, 2));
+  }
+  ROW("set_vc_solve_interval.zero", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    RKMPM_CHECK(rkmpm_sim_set_vc_solve_interval(f.sim, 3));
+    CALL(f.sim, rkmpm_sim_set_vc_solve_interval(f.sim, 0));
+    uint32_t steps = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_solve_interval(f.sim, &steps));
+    EXPECT(steps == 3, "the interval is %u", (unsigned)steps);
+    drop(&f);
+  }
+  ROW("vc_solve_interval.null_sim", RKMPM_ERR_NULL_POINTER) {
+    uint32_t steps = 77;
+    CALL(NULL, rkmpm_sim_vc_solve_interval(NULL, &steps));
+    EXPECT(steps == 77, "wrote the output after a failure");
+  }
+  ROW("vc_solve_interval.null_out", RKMPM_ERR_NULL_POINTER) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_vc_solve_interval(f.sim, NULL));
+    uint32_t steps = 0;
+    RKMPM_CHECK(rkmpm_sim_vc_solve_interval(f.sim, &steps));
+    EXPECT(steps == RKMPM_DEFAULT_VC_SOLVE_INTERVAL, "the default interval is %u",
+           (unsigned)steps);
+    drop(&f);
+  }
+  ROW("vc_solve_interval.misaligned_out", RKMPM_ERR_INVALID_ARGUMENT) {
+    Fixture f = block(2);
+    CALL(f.sim, rkmpm_sim_vc_solve_interval(f.sim, misaligned(raw)));
+    drop(&f);
+  }
   ROW("set_vc_surface_refresh.null_sim", RKMPM_ERR_NULL_POINTER) {
     CALL(NULL, rkmpm_sim_set_vc_surface_refresh(NULL, 2));
   }

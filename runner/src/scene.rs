@@ -100,6 +100,10 @@ pub struct OptionsSpec {
     /// VC only: the solve's iteration bound (default the engine's, 2000).
     #[serde(default)]
     pub vc_max_iterations: Option<usize>,
+    /// VC only: every how many steps the solve runs, the steps between taking its coefficients
+    /// (default the engine's: 4 with RK shape functions at order 1, else 1).
+    #[serde(default)]
+    pub vc_solve_interval: Option<u32>,
     /// VC only: every how many steps the surface of the particles is found anew (default the
     /// engine's, 4; 1 at every step).
     #[serde(default)]
@@ -135,16 +139,20 @@ impl OptionsSpec {
         Transfer::from_kind(self.transfer, self.flip.unwrap_or(0.0))
     }
 
-    /// The VC solve's stopping rule given `automatic`, the engine's rule for the scene's order
-    /// and grid: `None` (the automatic rule) without either key, its values where one key is
-    /// not given.
+    /// The VC solve's rule given `automatic`, the engine's rule for the scene's order and
+    /// grid: `None` (the automatic rule) without any of its keys, its values where a key is not
+    /// given.
     pub fn vc_solve(&self, automatic: rkmpm::VcSolve) -> Option<rkmpm::VcSolve> {
-        if self.vc_tolerance.is_none() && self.vc_max_iterations.is_none() {
+        if self.vc_tolerance.is_none()
+            && self.vc_max_iterations.is_none()
+            && self.vc_solve_interval.is_none()
+        {
             return None;
         }
         Some(rkmpm::VcSolve {
             tolerance: self.vc_tolerance.unwrap_or(automatic.tolerance),
             max_iterations: self.vc_max_iterations.unwrap_or(automatic.max_iterations),
+            interval: self.vc_solve_interval.unwrap_or(automatic.interval),
         })
     }
 
@@ -174,6 +182,7 @@ impl OptionsSpec {
                 ("vc_order", self.vc_order.is_some()),
                 ("vc_tolerance", self.vc_tolerance.is_some()),
                 ("vc_max_iterations", self.vc_max_iterations.is_some()),
+                ("vc_solve_interval", self.vc_solve_interval.is_some()),
                 ("vc_surface_refresh", self.vc_surface_refresh.is_some()),
             ] {
                 if given {
@@ -1050,7 +1059,12 @@ mod tests {
             Ok(SceneSim::D3(_)) => unreachable!("disks is 2D"),
             Err(e) => Err(e.message),
         };
-        assert_eq!(rule(disks), Ok(rkmpm::VcSolve::DEFAULT));
+        // RK1 + VC1: the automatic rule solves every `RK_INTERVAL` steps.
+        let rk_default = rkmpm::VcSolve {
+            interval: rkmpm::VcSolve::RK_INTERVAL,
+            ..rkmpm::VcSolve::DEFAULT
+        };
+        assert_eq!(rule(disks), Ok(rk_default));
         // RK2 + VC2 on the disks' grid (40 cells across): the automatic rule, 1e-4 (32 / 40)^3.
         let vc2 = disks
             .replacen("rk_order = 1\n", "rk_order = 2\n", 1)
@@ -1063,9 +1077,19 @@ mod tests {
             rule(&with("vc_tolerance = 1e-12\nvc_max_iterations = 50")),
             Ok(rkmpm::VcSolve {
                 tolerance: 1e-12,
-                max_iterations: 50
+                max_iterations: 50,
+                interval: rkmpm::VcSolve::RK_INTERVAL,
             })
         );
+        assert_eq!(
+            rule(&with("vc_solve_interval = 1")),
+            Ok(rkmpm::VcSolve {
+                interval: 1,
+                ..rkmpm::VcSolve::DEFAULT
+            })
+        );
+        let e = rule(&with("vc_solve_interval = 0")).unwrap_err();
+        assert!(e.contains("interval must be at least one step"), "{e}");
         let e = rule(&with("vc_tolerance = 1.5")).unwrap_err();
         assert!(e.contains("options: the VC solve's tolerance"), "{e}");
         let e = rule(&with("vc_max_iterations = 0")).unwrap_err();

@@ -632,14 +632,21 @@ fn bodies_are_the_components_on_any_number_of_threads() {
     }
 }
 
-/// The automatic stopping rule: the exact solve at order 1; at order ≥ 2 1e-4 to 32 cells
-/// across, then `1e-4 (32 / N)^3`, never below the exact solve's tolerance.
+/// The automatic rule: 1e-4 at order 1, solving every `RK_INTERVAL` steps with RK shape
+/// functions and at every step with the others; at order ≥ 2 1e-4 to 32 cells across, then
+/// `1e-4 (32 / N)^3`, never below the exact solve's tolerance, at every step.
 #[test]
 fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
+    use crate::options::ShapeKind;
     for cells in [1, 32, 64, 100_000] {
-        assert_eq!(VcSolve::automatic(1, cells), VcSolve::DEFAULT);
+        for shape in [ShapeKind::Linear, ShapeKind::Bspline2, ShapeKind::Bspline3] {
+            assert_eq!(VcSolve::automatic(1, cells, shape), VcSolve::DEFAULT);
+        }
+        let rk = VcSolve::automatic(1, cells, ShapeKind::Rk);
+        assert_eq!((rk.tolerance, rk.interval), (1e-4, VcSolve::RK_INTERVAL));
+        assert_eq!(VcSolve::automatic(2, cells, ShapeKind::Rk).interval, 1);
     }
-    let tolerance = |order, cells| VcSolve::automatic(order, cells).tolerance;
+    let tolerance = |order, cells| VcSolve::automatic(order, cells, ShapeKind::Rk).tolerance;
     assert_eq!(tolerance(2, 0), 1e-4);
     assert_eq!(tolerance(2, 16), 1e-4);
     assert_eq!(tolerance(3, 32), 1e-4);
@@ -647,7 +654,7 @@ fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
     assert!((tolerance(2, 128) / 1.5625e-6 - 1.0).abs() < 1e-15);
     assert_eq!(tolerance(2, 1 << 24), VcSolve::EXACT.tolerance);
     assert_eq!(
-        VcSolve::automatic(2, 64).max_iterations,
+        VcSolve::automatic(2, 64, ShapeKind::Rk).max_iterations,
         VcSolve::DEFAULT.max_iterations
     );
 }

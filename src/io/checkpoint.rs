@@ -43,7 +43,11 @@ const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// Version 6 adds the found surface's refresh interval (`Sim::set_vc_surface_refresh`), its
 /// age and the surface as carried, for an exact restart; older files load with the default
 /// interval and find the surface anew at their first step.
-pub const CHECKPOINT_VERSION: u32 = 6;
+/// Version 7 adds the VC solve's interval (`VcSolve::interval`; zero with the automatic rule)
+/// and the coefficients carried by node between solves with their age, for an exact restart;
+/// older files load with a given rule solving at every step, as they ran, and solve at their
+/// first step.
+pub const CHECKPOINT_VERSION: u32 = 7;
 
 /// Writes boundary points: positions, reference and current area normals, deformation
 /// gradients and tractions.
@@ -543,6 +547,20 @@ impl<const D: usize> Sim<D> {
             w.u32(self.surface_age);
             write_points(&mut w, &self.surface);
         }
+        if version >= 7 {
+            w.u32(match self.vc_solve_is_automatic() {
+                true => 0,
+                false => self.vc_solve().interval,
+            });
+            let carried = self.vc.as_ref().map(|vc| vc.carried());
+            w.u32(carried.map_or(0, |c| c.age));
+            w.len(carried.map_or(0, |c| c.per()));
+            w.len(carried.map_or(0, |c| c.entries().count()));
+            for (n, v) in carried.iter().flat_map(|c| c.entries()) {
+                w.u64(n as u64);
+                w.f64s(v);
+            }
+        }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
         out.extend_from_slice(MAGIC);
@@ -654,6 +672,7 @@ impl<const D: usize> Sim<D> {
                 tolerance: r.f64()?,
                 max_iterations: usize::try_from(r.u64()?)
                     .map_err(|_| corrupt("VC solve iteration count too large"))?,
+                interval: 1,
             }
         } else {
             crate::VcSolve::EXACT
@@ -668,6 +687,40 @@ impl<const D: usize> Sim<D> {
                 .map_err(|_| corrupt("a found-surface refresh of zero steps"))?;
             sim.surface_age = r.u32()?;
             sim.surface = read_points(&mut r, &sim.grid, "found surface point")?;
+        }
+        if version >= 7 {
+            let interval = r.u32()?;
+            if !sim.vc_solve_is_automatic() {
+                let solve = crate::VcSolve {
+                    interval,
+                    ..sim.vc_solve()
+                };
+                sim.set_vc_solve(solve)
+                    .map_err(|_| corrupt("a VC solve interval of zero steps"))?;
+            }
+            let age = r.u32()?;
+            let per = r.len(8)?;
+            let count = r.len(8 * (per + 1))?;
+            let node_count = sim.grid.node_count();
+            let (mut nodes, mut values) =
+                (Vec::with_capacity(count), Vec::with_capacity(count * per));
+            for _ in 0..count {
+                let n = r.u64()?;
+                if n >= node_count as u64 {
+                    return Err(corrupt(format!("carried VC coefficients at node {n}")));
+                }
+                nodes.push(n as usize);
+                for _ in 0..per {
+                    values.push(r.f64()?);
+                }
+            }
+            match sim.vc.as_mut() {
+                Some(vc) => vc
+                    .restore_carried(nodes, &values, per, age, node_count)
+                    .map_err(|e| corrupt(e.message))?,
+                None if count > 0 => return Err(corrupt("carried VC coefficients without VC")),
+                None => {}
+            }
         }
         if !r.0.is_empty() {
             return Err(corrupt("the checkpoint has trailing data"));
@@ -774,7 +827,7 @@ mod tests {
         assert_eq!(old.particles, sim.particles);
         // A flag other than 0 or 1 is refused.
         let mut bytes = sim.checkpoint_bytes();
-        let flag = bytes.len() - 4 - EMPTY_SURFACE_TAIL - 16 - 6 * 8 - 4;
+        let flag = bytes.len() - 4 - carried_tail(&sim) - EMPTY_SURFACE_TAIL - 16 - 6 * 8 - 4;
         bytes[flag] = 2;
         refused_as_corrupt(&mut bytes, "energy accounting flag 2");
     }
@@ -794,6 +847,7 @@ mod tests {
         let rule = crate::VcSolve {
             tolerance: 1e-6,
             max_iterations: 7,
+            interval: 1,
         };
         sim.set_vc_solve(rule).unwrap();
         let copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
@@ -802,7 +856,7 @@ mod tests {
         assert_eq!(old.vc_solve(), crate::VcSolve::EXACT);
         // A tolerance the engine refuses is a damaged file.
         let mut bytes = sim.checkpoint_bytes();
-        let tolerance = bytes.len() - 4 - EMPTY_SURFACE_TAIL - 16;
+        let tolerance = bytes.len() - 4 - carried_tail(&sim) - EMPTY_SURFACE_TAIL - 16;
         bytes[tolerance..tolerance + 8].copy_from_slice(&2.0f64.to_le_bytes());
         refused_as_corrupt(&mut bytes, "tolerance");
     }
@@ -842,9 +896,57 @@ mod tests {
         // The interval sits after the solve's rule; the surface's arrays follow it.
         let mut bytes = sim.checkpoint_bytes();
         let surface_bytes = sim.surface.len() * (2 + 2 + 2 + 4) * 8;
-        let interval = bytes.len() - 4 - EMPTY_SURFACE_TAIL - surface_bytes;
+        let interval = bytes.len() - 4 - carried_tail(&sim) - EMPTY_SURFACE_TAIL - surface_bytes;
         bytes[interval..interval + 4].copy_from_slice(&0u32.to_le_bytes());
         refused_as_corrupt(&mut bytes, "refresh of zero steps");
+    }
+
+    /// Bytes of format 7's tail: the solve's interval and the carried coefficients' age (4 bytes
+    /// each), their values a node and their count (8 each), then per node its index and values.
+    fn carried_tail(sim: &Sim<2>) -> usize {
+        let carried = sim.vc.as_ref().map(|vc| vc.carried());
+        4 + 4 + 8 + 8 + carried.map_or(0, |c| c.entries().count() * (1 + c.per()) * 8)
+    }
+
+    /// Format 7 keeps the solve's interval and the coefficients carried between solves: a run
+    /// saved between solves goes on as the uninterrupted run, bit for bit. A format-6 file
+    /// loads with its rule solving at every step, as it ran, and nothing carried; a carried
+    /// node outside the grid is a damaged file.
+    #[test]
+    fn the_carried_coefficients_are_kept_from_format_7() {
+        let mut sim = block();
+        sim.set_integration(crate::Integration::Vc { order: 1 })
+            .unwrap();
+        let rule = crate::VcSolve {
+            interval: 3,
+            ..sim.vc_solve()
+        };
+        sim.set_vc_solve(rule).unwrap();
+        let dt = sim.stable_dt(0.3).unwrap();
+        for _ in 0..2 {
+            sim.step(dt).unwrap();
+        }
+        let carried = |sim: &Sim<2>| sim.vc.as_ref().unwrap().carried().clone();
+        assert_eq!(carried(&sim).age, 1);
+        assert!(!carried(&sim).is_empty());
+        let mut copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
+        assert_eq!(copy.vc_solve(), rule);
+        assert_eq!(carried(&copy), carried(&sim));
+        // Steps 3 (carried), 4 (a solve from the carried coefficients) and 5.
+        for _ in 0..3 {
+            sim.step(dt).unwrap();
+            copy.step(dt).unwrap();
+        }
+        assert_eq!(copy.particles, sim.particles);
+        assert_eq!(carried(&copy), carried(&sim));
+        let old = Sim::<2>::from_checkpoint_bytes(&sim.encode(6)).unwrap();
+        assert_eq!(old.vc_solve().interval, 1);
+        assert!(carried(&old).is_empty());
+        // The first carried node's index follows the interval, age, size and count.
+        let mut bytes = sim.checkpoint_bytes();
+        let node = bytes.len() - 4 - carried_tail(&sim) + 24;
+        bytes[node..node + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+        refused_as_corrupt(&mut bytes, "carried VC coefficients at node");
     }
 
     /// A checkpoint edited in its payload, its checksum made right again, is refused as a

@@ -352,6 +352,8 @@ impl<const D: usize> Sim<D> {
         if let Some(vc) = &mut self.vc {
             vc.linear_fit = self.vc_linear_fit && shape.vc_linear_fit();
         }
+        // The automatic rule depends on the shape functions' kind.
+        self.apply_vc_solve();
         Ok(())
     }
 
@@ -391,13 +393,15 @@ impl<const D: usize> Sim<D> {
         Ok(())
     }
 
-    /// The stopping rule of VC's conservative solve (kept by checkpoints). Unless given one, a
-    /// simulation takes [`crate::VcSolve::automatic`] for its VC order and grid: the exact solve
-    /// (a residual of 1e-12 of the right-hand side's) at order 1, and at order ≥ 2 1e-4 on grids
-    /// of up to 32 cells across, falling as `(32 / N)^3` on wider ones. Linear and angular
-    /// momentum are conserved whatever the rule; a looser rule meets the divergence equalities
-    /// less exactly and costs fewer iterations (docs/convergence/FINDINGS.md, "The VC solve's
-    /// stopping rule"). Refuses a tolerance outside `(0, 1]` and zero iterations.
+    /// The rule of VC's conservative solve (kept by checkpoints, with the coefficients carried
+    /// between solves). Unless given one, a simulation takes [`crate::VcSolve::automatic`] for
+    /// its VC order, grid and shape functions: at order 1 a residual of 1e-4 of the right-hand
+    /// side's, solved every fourth step with RK shape functions and at every step with the
+    /// others; at order ≥ 2 1e-4 on grids of up to 32 cells across, falling as `(32 / N)^3` on
+    /// wider ones, at every step. Linear and angular momentum are conserved whatever the rule; a
+    /// looser rule meets the divergence equalities less exactly and costs less
+    /// (docs/convergence/FINDINGS.md, "The VC solve's stopping rule"). Refuses a tolerance
+    /// outside `(0, 1]`, zero iterations and an interval of zero steps.
     pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
         solve.check()?;
         self.vc_solve = Some(solve);
@@ -432,8 +436,9 @@ impl<const D: usize> Sim<D> {
     }
 
     fn vc_solve_of(&self, order: u32) -> crate::VcSolve {
+        let shape = self.options.shape.kind();
         self.vc_solve
-            .unwrap_or_else(|| crate::VcSolve::automatic(order, self.grid.cells_across()))
+            .unwrap_or_else(|| crate::VcSolve::automatic(order, self.grid.cells_across(), shape))
     }
 
     /// Chooses the velocity transfer. Before stepping only.

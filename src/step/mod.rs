@@ -461,6 +461,10 @@ impl<const D: usize> Step<'_, D> {
         if self.energy.on {
             self.add_work_to_ledger();
         }
+        // VC's solve of this step is carried to the steps up to the next (`VcSolve::interval`).
+        if let Some(vc) = self.vc.as_mut() {
+            vc.commit_step(self.grid.node_count());
+        }
         let ps = &mut self.particles;
         let new = &mut self.work.new_state;
         std::mem::swap(&mut ps.position, &mut new.position);

@@ -428,17 +428,25 @@ fn rejected_steps_keep_the_last_good_state() {
     assert_eq!(sim.particles, fresh.particles);
 }
 
-/// A rejected step keeps the found surface VC carries between refreshes as it was, whether the
-/// step would have carried it or found it anew; stepping on goes as a run that never saw it.
+/// A rejected step keeps the found surface VC carries between refreshes, and the coefficients
+/// it carries between solves, as they were, whether the step would have carried them or found
+/// them anew; stepping on goes as a run that never saw it. The steps between solves take no
+/// iteration.
 #[test]
-fn rejected_steps_keep_the_carried_surface() {
+fn rejected_steps_keep_the_carried_surface_and_coefficients() {
     let vc_block = || {
         let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
         sim.set_integration(crate::Integration::Vc { order: 1 })
             .unwrap();
         sim.set_vc_surface_refresh(2).unwrap();
+        let solve = crate::VcSolve {
+            interval: 3,
+            ..sim.vc_solve()
+        };
+        sim.set_vc_solve(solve).unwrap();
         sim
     };
+    let carried = |sim: &Sim<2>| sim.vc.as_ref().unwrap().carried().clone();
     let mut sim = vc_block();
     let dt = sim.stable_dt(0.3).unwrap();
     let out_of_grid = || -> Box<dyn crate::BodyForce<2>> {
@@ -450,17 +458,34 @@ fn rejected_steps_keep_the_carried_surface() {
         )
     };
     let mut fresh = vc_block();
-    for step in 1..=3 {
-        // Step 2 carries the surface of step 1, step 3 finds it anew.
-        let before = (sim.particles.clone(), sim.vc_surface().clone());
+    for step in 1..=5 {
+        // Step 2 carries the surface of step 1, step 3 finds it anew; steps 1 and 4 solve, the
+        // others take the coefficients of the last solve.
+        let before = (
+            sim.particles.clone(),
+            sim.vc_surface().clone(),
+            carried(&sim),
+        );
         sim.set_body_force(Some(out_of_grid()));
         assert_eq!(sim.step(dt).unwrap_err().kind, ErrorKind::OutsideGrid);
         assert_eq!((&sim.particles, sim.vc_surface()), (&before.0, &before.1));
+        assert_eq!(carried(&sim), before.2, "step {step}");
         sim.set_body_force(None);
         sim.step(dt).unwrap();
         fresh.step(dt).unwrap();
         assert_eq!(sim.particles, fresh.particles, "step {step}");
         assert_eq!(sim.vc_surface(), fresh.vc_surface(), "step {step}");
+        assert_eq!(carried(&sim), carried(&fresh), "step {step}");
+        let solved = step % 3 == 1;
+        assert_eq!(
+            carried(&sim).age,
+            if solved { 0 } else { (step as u32 - 1) % 3 }
+        );
+        assert_eq!(
+            sim.vc.as_ref().unwrap().iterations() > 0,
+            solved,
+            "step {step}"
+        );
     }
 }
 

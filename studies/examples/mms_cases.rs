@@ -10,9 +10,10 @@
 //!   GRIDS      cells per side, comma-separated (16,32,64)
 //!   --mixed-walls  fixed walls on the low faces, slip walls on the high ones (slip everywhere
 //!                  without it)
-//!   --vc-tolerance T, --vc-iterations N  the VC solve's stopping rule (default the engine's automatic
-//!                                       rule, `rkmpm::VcSolve::automatic`; with one option, the exact
-//!                                       solve's value of the other: 1e-12, 2000)
+//!   --vc-tolerance T, --vc-iterations N, --vc-interval K  the VC solve's rule (default the
+//!                                       engine's automatic rule, `rkmpm::VcSolve::automatic`; with
+//!                                       one option, the exact solve's values of the others:
+//!                                       1e-12, 2000, every step)
 //! ```
 //!
 //! Prints the relative L2 and energy-norm errors and the run time per grid, and the L2 slope.
@@ -91,9 +92,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // the other.
     let exact = rkmpm::VcSolve::EXACT;
     let (tolerance, iterations) = (number("--vc-tolerance")?, number("--vc-iterations")?);
-    let vc_solve = (tolerance.is_some() || iterations.is_some()).then(|| rkmpm::VcSolve {
-        tolerance: tolerance.unwrap_or(exact.tolerance),
-        max_iterations: iterations.map_or(exact.max_iterations, |n| n as usize),
+    let interval = number("--vc-interval")?;
+    let vc_solve = (tolerance.is_some() || iterations.is_some() || interval.is_some()).then(|| {
+        rkmpm::VcSolve {
+            tolerance: tolerance.unwrap_or(exact.tolerance),
+            max_iterations: iterations.map_or(exact.max_iterations, |n| n as usize),
+            interval: interval.map_or(exact.interval, |n| n as u32),
+        }
     });
     let mms = AxisAlignedMms {
         walls,

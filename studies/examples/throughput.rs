@@ -11,7 +11,7 @@
 //!
 //! Options: `--dim 2|3`, `--method linear|bspline2|bspline3|rk1|rk2`, `--vc` (VC integration of
 //! order 1, order 2 for rk2), `--vc-tolerance T` (the VC solve's tolerance, `rkmpm::VcSolve`;
-//! default the engine's), `--surface-refresh K` (VC finds the surface every K steps,
+//! default the engine's), `--vc-interval K` (the VC solve every K steps; default the engine's), `--surface-refresh K` (VC finds the surface every K steps,
 //! `Sim::set_vc_surface_refresh`; default the engine's, 4), `--particles N` (rounded to m^D
 //! with m even), `--steps S` (timed steps, default 50), `--warmup W` (untimed steps first, default 2), `--max-seconds T` (stop
 //! timing after the first step that ends past T seconds, at least `--min-steps`, default 5),
@@ -59,6 +59,7 @@ struct Args {
     method: String,
     vc: bool,
     vc_tolerance: Option<f64>,
+    vc_interval: Option<u32>,
     surface_refresh: Option<u32>,
     particles: usize,
     steps: usize,
@@ -85,6 +86,7 @@ fn parse() -> Result<Args, String> {
         method: "bspline2".into(),
         vc: false,
         vc_tolerance: None,
+        vc_interval: None,
         surface_refresh: None,
         particles: 65536,
         steps: 50,
@@ -121,6 +123,9 @@ fn parse() -> Result<Args, String> {
             "--vc-tolerance" => {
                 a.vc_tolerance = Some(val()?.parse().map_err(|e| format!("--vc-tolerance: {e}"))?)
             }
+            "--vc-interval" => {
+                a.vc_interval = Some(val()?.parse().map_err(|e| format!("--vc-interval: {e}"))?)
+            }
             "--particles" => {
                 a.particles = val()?.parse().map_err(|e| format!("--particles: {e}"))?
             }
@@ -147,7 +152,7 @@ fn parse() -> Result<Args, String> {
             "-h" | "--help" => {
                 return Err(
                     "usage: throughput [--dim 2|3] [--method linear|bspline2|bspline3|rk1|rk2] \
-                     [--vc] [--vc-tolerance T] [--surface-refresh K] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
+                     [--vc] [--vc-tolerance T] [--vc-interval K] [--surface-refresh K] [--particles N] [--steps S] [--warmup W] [--max-seconds T] \
                      [--min-steps K] [--header] [--phases] [--stored-stencils] \
                      [--transfer apic|pic|flip|mls] [--gravity] [--material neo-hookean|drucker-prager] \
                      [--padding CELLS] [--memory] [--shuffle] [--no-sort] [--energy] [--vtk DIR]"
@@ -222,10 +227,12 @@ fn run<const D: usize>(a: &Args) -> Result<(), String> {
         if let Some(steps) = a.surface_refresh {
             sim.set_vc_surface_refresh(steps).map_err(e)?;
         }
-        if let Some(tolerance) = a.vc_tolerance {
+        if a.vc_tolerance.is_some() || a.vc_interval.is_some() {
+            let automatic = sim.vc_solve();
             let solve = rkmpm::VcSolve {
-                tolerance,
-                ..sim.vc_solve()
+                tolerance: a.vc_tolerance.unwrap_or(automatic.tolerance),
+                interval: a.vc_interval.unwrap_or(automatic.interval),
+                ..automatic
             };
             sim.set_vc_solve(solve).map_err(e)?;
         }

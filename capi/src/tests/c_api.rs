@@ -1085,11 +1085,36 @@ fn vc_solve_rule_through_the_c_api() {
             assert!(message.starts_with("rkmpm_sim_set_vc_solve: "), "{message}");
         }
         assert_eq!(rule(sim), (1e-4, 2000));
+        let interval = |s: *const RkmpmSim| {
+            let mut steps = 0u32;
+            assert_eq!(rkmpm_sim_vc_solve_interval(s, &mut steps), RKMPM_OK);
+            steps
+        };
+        assert_eq!(interval(sim), RKMPM_DEFAULT_VC_SOLVE_INTERVAL);
+        assert_eq!(
+            rkmpm_sim_set_vc_solve_interval(sim, 0),
+            RKMPM_ERR_INVALID_ARGUMENT
+        );
+        let message = last_error();
+        assert!(
+            message.starts_with("rkmpm_sim_set_vc_solve_interval: ")
+                && message.contains("interval must be at least one step"),
+            "{message}"
+        );
+        assert_eq!(
+            rkmpm_sim_vc_solve_interval(sim, null_mut()),
+            RKMPM_ERR_NULL_POINTER
+        );
+        assert_eq!(interval(sim), RKMPM_DEFAULT_VC_SOLVE_INTERVAL);
+        // The tolerance and the interval are set apart, each keeping the other.
+        assert_eq!(rkmpm_sim_set_vc_solve_interval(sim, 2), RKMPM_OK);
         assert_eq!(rkmpm_sim_set_vc_solve(sim, 1e-6, 50), RKMPM_OK);
+        assert_eq!(interval(sim), 2);
         assert_eq!(rkmpm_sim_save(sim, path.as_ptr()), RKMPM_OK);
         let mut copy = null_mut();
         assert_eq!(rkmpm_sim_load(path.as_ptr(), &mut copy), RKMPM_OK);
         assert_eq!(rule(copy), (1e-6, 50));
+        assert_eq!(interval(copy), 2);
         rkmpm_sim_free(copy);
         rkmpm_sim_free(sim);
     }

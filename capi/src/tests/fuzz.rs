@@ -98,6 +98,7 @@ enum Call {
     AdvanceBy(f64, f64),
     SetMaxSteps(u64),
     SetVcSolve(f64, u64),
+    SetVcSolveInterval(u32),
     StableDt(f64),
     Read {
         field: u32,
@@ -171,6 +172,7 @@ fn call_with_any_double() -> impl Strategy<Value = Call> {
         1 => prop_oneof![Just(0u64), Just(1), 1..=FUZZ_MAX_STEPS].prop_map(Call::SetMaxSteps),
         1 => (prop_oneof![1e-12f64..1.0, any_double()], 0u64..50)
             .prop_map(|(t, n)| Call::SetVcSolve(t, n)),
+        1 => (0u32..6).prop_map(Call::SetVcSolveInterval),
     ];
     prop_oneof![6 => call(), 4 => wide]
 }
@@ -288,6 +290,7 @@ unsafe fn apply(sim: *mut RkmpmSim, dim: usize, c: &Call) -> RkmpmStatus {
         }
         Call::SetMaxSteps(n) => rkmpm_sim_set_max_steps_per_advance(sim, *n),
         Call::SetVcSolve(t, n) => rkmpm_sim_set_vc_solve(sim, *t, *n),
+        Call::SetVcSolveInterval(k) => rkmpm_sim_set_vc_solve_interval(sim, *k),
         Call::StableDt(cfl) => {
             let mut dt = 0.0;
             rkmpm_sim_stable_dt(sim, *cfl, &mut dt)
