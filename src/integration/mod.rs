@@ -138,8 +138,8 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// (the study's errors within 0.5 % of the exact solve's; with B-splines a carried solve moves
 /// the energy-norm error by 1.7 % at fixed walls), and at order ≥ 2 a tolerance of 1e-4 that
 /// falls as `h^3` on grids finer than 32 cells across, at every step (a quarter to a half of
-/// the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve at every step for tests that check
-/// the equalities or mirror symmetry to round-off.
+/// the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve
+/// at every step for tests that check the equalities or mirror symmetry to round-off.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VcSolve {
     pub tolerance: f64,
@@ -1197,7 +1197,7 @@ impl<const D: usize> VcCorrection<D> {
         let mut kd = vec![0.0; len];
         precondition(&r, &mut z);
         let rhs_rz = dot(&r, &z);
-        let zeta = match carry && carried {
+        let mut zeta = match carry && carried {
             true => {
                 let mut zeta = self.carried.at(&nodes.active, m * D);
                 if project {
@@ -1213,7 +1213,6 @@ impl<const D: usize> VcCorrection<D> {
             }
             false => vec![0.0; len],
         };
-        let mut zeta = zeta;
         let mut d = z.clone();
         let mut rz = dot(&r, &z);
         // At order ≥ 2 the V-cycle's coarsest solve is a pseudo-inverse, whose norm of the
@@ -1325,8 +1324,8 @@ impl<const D: usize> VcCorrection<D> {
     }
 
     /// At order 1, bounds each node's correction (`first_order_correction_bound`) by its reach
-    /// against the largest, `reach` (cells of size `h`); the fits are taken of the bounded coefficients, so the
-    /// gradients still sum to zero.
+    /// against the largest, `reach` (cells of size `h`); the fits are taken of the bounded
+    /// coefficients, so the gradients still sum to zero.
     fn bound_first_order(&self, zeta: &mut [f64], reach: f64, h: f64) {
         if self.m() > 1 {
             return;
