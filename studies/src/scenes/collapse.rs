@@ -72,6 +72,8 @@ pub struct GranularColumn {
     /// The gate that holds the column before the release: `None` (the default) releases the
     /// whole column at once, as if the gate vanished.
     pub gate: Option<Gate>,
+    /// VC's solve (`None`, the default: the engine's automatic rule).
+    pub vc_solve: Option<rkmpm::VcSolve>,
 }
 
 /// How far the gate reaches above the column's top at the start, and how far above it the lifted
@@ -115,6 +117,7 @@ impl Default for GranularColumn {
             transfer: Transfer::Apic,
             rheology: None,
             gate: None,
+            vc_solve: None,
         }
     }
 }
@@ -172,6 +175,9 @@ impl GranularColumn {
         let mut sim = Sim::<2>::new([0.0, 0.0], [cells_x, cells_y], h)?;
         sim.set_shape(self.shape)?;
         sim.set_integration(self.integration)?;
+        if let Some(solve) = self.vc_solve {
+            sim.set_vc_solve(solve)?;
+        }
         sim.set_transfer(self.transfer)?;
         sim.set_wall(0, Side::Low, self.wall)?;
         sim.set_wall(1, Side::Low, Wall::Friction(self.floor_friction))?;
