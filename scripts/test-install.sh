@@ -65,16 +65,16 @@ for f in "$libdir/librkmpm.a" "$libdir/librkmpm.so"; do
   [ "$debug_sections" = 0 ] || fail "$f still carries debug info ($debug_sections .debug_info sections)"
   echo "   $(basename "$f"): $(du -h "$f" | cut -f1), no debug info"
 done
-# And under a stated size (docs/INSTALL.md: 27 MB and 4.6 MB measured; the bounds leave 1.5x
+# And under a stated size (docs/INSTALL.md: 31 MB and 7.1 MB measured; the bounds leave 1.5x
 # for a newer Rust standard library, which is most of the static one, and for rkmpm's growth;
-# with debug info they are 98 MB and 41 MB, so a build that stops stripping fails here).
+# with debug info they are 131 MB and 61 MB, so a build that stops stripping fails here).
 size_bound() {
   local size
   size=$(stat -c %s "$1")
   [ "$size" -le $(($2 * 1000 * 1000)) ] || fail "$1 is $size bytes, above the stated $2 MB"
 }
-size_bound "$libdir/librkmpm.a" 40
-size_bound "$libdir/librkmpm.so" 7
+size_bound "$libdir/librkmpm.a" 47
+size_bound "$libdir/librkmpm.so" 11
 grep -q "$root" "$libdir/cmake/rkmpm/rkmpmConfig.cmake" "$libdir/pkgconfig/"*.pc \
   && fail "an installed package file refers to the source or build tree"
 
