@@ -164,7 +164,7 @@ fn low_column_keeps_its_top() {
 }
 
 /// RK1 + VC1 on the collapse with the automatic rule, which solves every fourth step and carries
-/// the coefficients between, against a solve at every step: a = 2 at 8 cells (about 8 s in
+/// the coefficients between, against a solve at every step: a = 2 at 8 cells (about 25 s in
 /// release for both runs) runs to rest. Measured: run-out 3.420 against 3.425 (−0.2 %), height
 /// 0.865 against 0.862 (+0.4 %); asserted within 2 %, about five times that.
 #[test]
