@@ -92,7 +92,7 @@ pub use boundary_points::BoundaryPoints;
 use crate::error::{Error, Result};
 use crate::grid::{Bins, Grid, GridNodes, NodeScatter, SharedSlice};
 use crate::options::ShapeKind;
-use crate::shape::{Monomials, Stencils, TensorFactors};
+use crate::shape::{Monomials, Stencils, SupportNodes, TensorFactors};
 use crate::{Matrix, Vector};
 pub(crate) use carried::CarriedCoefficients;
 use nalgebra::{DMatrix, DVectorViewMut};
@@ -547,6 +547,14 @@ pub struct VcCorrection<const D: usize> {
 
 impl<const D: usize> VcCorrection<D> {
     /// Order 1 to 4.
+    /// Whether the correction reads the stencils as stored lists: at order ≥ 2 (the basis at
+    /// each node) and with the linear fit; at order 1 with the mean fit it reads a
+    /// tensor-product stencil's factors ([`SupportNodes`]), and B-spline steps need not list
+    /// them.
+    pub fn reads_lists(&self) -> bool {
+        self.order > 1 || self.linear_fit
+    }
+
     pub fn new(order: u32) -> Result<Self> {
         if !(1..=4).contains(&order) {
             return Err(Error::invalid(format!(
@@ -614,10 +622,15 @@ impl<const D: usize> VcCorrection<D> {
             boundary,
             boundary_stencils,
             body,
+            tensor,
             ..
         } = inputs;
         let m = self.m();
         let h = grid.cell_size;
+        let support = SupportNodes {
+            stored: stencils,
+            tensor,
+        };
         self.body_of.clear();
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
             for colour in &bins.colours {
@@ -635,12 +648,8 @@ impl<const D: usize> VcCorrection<D> {
         {
             let out = NodeScatter::new(nodes);
             by_colour(&|p| {
-                stencils.for_each_shape(p, |_, s| {
-                    if s.in_support() {
-                        // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                        unsafe { out.touch(s.node) }
-                    }
-                })
+                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                support.for_each(p, |s| unsafe { out.touch(s.node) })
             });
         }
         bins.collect_active(grid, nodes);
@@ -673,10 +682,7 @@ impl<const D: usize> VcCorrection<D> {
             // below.
             let first_order = |p: usize| {
                 let v = volumes[p];
-                stencils.for_each_shape(p, |_, s| {
-                    if !s.in_support() {
-                        return;
-                    }
+                support.for_each(p, |s| {
                     let slot = nodes.slot(s.node);
                     // SAFETY: as below.
                     unsafe {
@@ -793,6 +799,10 @@ impl<const D: usize> VcCorrection<D> {
         let m = self.m();
         let slots = nodes.active.len();
         let len = slots * m * D;
+        let support = SupportNodes {
+            stored: stencils,
+            tensor,
+        };
         // Between solves (`VcSolve::interval`), the last solve's coefficients, carried by node:
         // at order 1 only (order-2 coefficients carried to moved particles: jittered RK2 + VC2
         // 54 % off at 16 cells, a free block unstable), and not per body under contact (those
@@ -865,13 +875,11 @@ impl<const D: usize> VcCorrection<D> {
             frame.par_extend((0..positions.len()).into_par_iter().map(|p| {
                 let (mut weight, mut first, mut second) = (0.0, Vector::zeros(), Matrix::zeros());
                 if counted(p) {
-                    stencils.for_each_shape(p, |_, s| {
-                        if s.in_support() {
-                            let (w, d) = (s.value.abs(), offset(p, s.node));
-                            weight += w;
-                            first += w * d;
-                            second += w * d * d.transpose();
-                        }
+                    support.for_each(p, |s| {
+                        let (w, d) = (s.value.abs(), offset(p, s.node));
+                        weight += w;
+                        first += w * d;
+                        second += w * d * d.transpose();
                     });
                 }
                 linear_frame(weight, first, second)
@@ -990,10 +998,7 @@ impl<const D: usize> VcCorrection<D> {
                     *mu = supports.fit(p, zeta);
                     return;
                 }
-                stencils.for_each_shape(p, |_, s| {
-                    if !s.in_support() {
-                        return;
-                    }
+                support.for_each(p, |s| {
                     let w = s.value.abs();
                     weight += w;
                     let z = &zeta[nodes.slot(s.node) * m * D..];
@@ -1042,12 +1047,10 @@ impl<const D: usize> VcCorrection<D> {
         let body_of = from_lattice.unwrap_or_else(|| {
             bodies(slots, positions.len(), |p, visit: &mut dyn FnMut(usize)| {
                 if counted(p) {
-                    stencils.for_each_shape(p, |_, s| {
-                        if s.in_support() {
-                            let slot = nodes.slot(s.node);
-                            if weak == 0.0 || moment[slot] >= weak {
-                                visit(slot);
-                            }
+                    support.for_each(p, |s| {
+                        let slot = nodes.slot(s.node);
+                        if weak == 0.0 || moment[slot] >= weak {
+                            visit(slot);
                         }
                     });
                 }
@@ -1112,10 +1115,7 @@ impl<const D: usize> VcCorrection<D> {
                             continue;
                         }
                         // Order 1 (orders ≥ 2 without the assembled `K` take the supports).
-                        stencils.for_each_shape(p, |_, s| {
-                            if !s.in_support() {
-                                return;
-                            }
+                        support.for_each(p, |s| {
                             let v = v * s.value.abs();
                             // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                             let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };

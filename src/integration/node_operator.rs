@@ -338,7 +338,9 @@ impl<const D: usize> NodeOperator<D> {
         tensor: Option<TensorFactors<'_, D>>,
         storage: OperatorStorage,
     ) -> Option<Self> {
-        let len = stencils.len;
+        // The stencil's size: the factors' box where there are factors (the lists are then
+        // not stored at order 1, `VcCorrection::reads_lists`).
+        let len = tensor.map_or(stencils.len, |t| t.width.pow(D as u32));
         let width = (1..=len).find(|w| w.pow(D as u32) >= len)?;
         if width.pow(D as u32) != len {
             return None;

@@ -18,8 +18,8 @@ pub use monomials::Monomials;
 pub use rk::{cubic_kernel, LatticeRk1, ReproducingKernel, MAX_CONDITION};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the benchmarks
 pub use stencil::{
-    in_support, Gathered, ScatterInput, StencilNode, StencilView, Stencils, TensorFactors,
-    TensorStencils, TensorView,
+    in_support, Gathered, ScatterInput, StencilNode, StencilView, Stencils, SupportNodes,
+    TensorFactors, TensorStencils, TensorView,
 };
 
 use crate::error::Result;

@@ -211,6 +211,75 @@ impl<const D: usize> TensorFactors<'_, D> {
         let n = D * self.width;
         &self.derivatives[p * n..(p + 1) * n]
     }
+
+    /// Calls `f(node)` for the nodes of particle `p`'s stencil in its support, in slot order,
+    /// with the value and gradient the stored lists hold ([`Stencils::fill_from_factors`]: the
+    /// products of [`tensor_product`], the same bits), computed from the factors instead of
+    /// read from the lists.
+    #[inline(always)]
+    pub fn for_each_in_support(&self, p: usize, f: impl FnMut(StencilNode<D>)) {
+        match self.width {
+            2 => self.visit::<2>(p, f),
+            3 => self.visit::<3>(p, f),
+            4 => self.visit::<4>(p, f),
+            w => unreachable!("B-spline stencils of width {w}"),
+        }
+    }
+
+    #[inline(always)]
+    fn visit<const W: usize>(&self, p: usize, mut f: impl FnMut(StencilNode<D>)) {
+        let factors = |v: &[f64]| -> [[f64; W]; D] {
+            std::array::from_fn(|a| std::array::from_fn(|k| v[a * W + k]))
+        };
+        let (w, dw) = (factors(self.values(p)), factors(self.derivatives(p)));
+        let mut k = [0usize; D];
+        let mut node = self.base(p);
+        for _ in 0..W.pow(D as u32) {
+            let (value, gradient) = tensor_product(&w, &dw, &k);
+            if in_support(value, &gradient) {
+                f(StencilNode {
+                    node,
+                    value,
+                    gradient,
+                });
+            }
+            for (ka, stride) in k.iter_mut().zip(self.strides) {
+                *ka += 1;
+                node += stride;
+                if *ka < W {
+                    break;
+                }
+                *ka = 0;
+                node -= W * stride;
+            }
+        }
+    }
+}
+
+/// The nodes in the particles' supports, as the stored lists give them or, for a
+/// tensor-product stencil, computed from its factors ([`TensorFactors::for_each_in_support`]:
+/// the same nodes, values and gradients, in the same order): the passes over the stencils that
+/// VC takes read the factors where there are some, a fraction of the lists' bytes.
+#[derive(Debug, Clone, Copy)]
+pub struct SupportNodes<'a, const D: usize> {
+    pub stored: &'a Stencils<D>,
+    pub tensor: Option<TensorFactors<'a, D>>,
+}
+
+impl<const D: usize> SupportNodes<'_, D> {
+    /// Calls `f(node)` for every node in the support of particle `p`, with the shape
+    /// function's own values (not the transfer weights of [`StencilView::for_each`]).
+    #[inline(always)]
+    pub fn for_each(&self, p: usize, mut f: impl FnMut(StencilNode<D>)) {
+        match &self.tensor {
+            Some(tensor) => tensor.for_each_in_support(p, f),
+            None => self.stored.for_each_shape(p, |_, s| {
+                if s.in_support() {
+                    f(s)
+                }
+            }),
+        }
+    }
 }
 
 /// The grid-to-particle sums of [`StencilView::gather`], node by node.
@@ -286,6 +355,16 @@ impl<const D: usize> Stencils<D> {
         } else {
             self.lumping.clear();
         }
+    }
+
+    /// No stencils (what a step that reads only the factors keeps; the storage stays).
+    pub fn clear(&mut self) {
+        self.len = 0;
+        for v in [&mut self.values, &mut self.lumping, &mut self.transfer] {
+            v.clear();
+        }
+        self.nodes.clear();
+        self.gradients.clear();
     }
 
     /// The lists of B-spline stencils of width `W` from their factors (`factors` computed with

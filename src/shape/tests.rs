@@ -276,7 +276,8 @@ type Visitor<'a, const D: usize> = dyn FnMut(usize, StencilNode<D>, Vector<D>) +
 /// Every stencil node with a nonzero value or gradient lies in the box of
 /// `ShapeFunction::stencil_origin` and `stencil_width` (the coloured particle-to-grid map writes
 /// only there), and the 1D factors of B-splines (and of RK1 with ã = 2) give the stored values
-/// bit for bit, read as factors or filled into the lists (`Stencils::fill_from_factors`).
+/// bit for bit, read as factors or filled into the lists (`Stencils::fill_from_factors`), the
+/// nodes in support too (`TensorFactors::for_each_in_support`).
 fn check_stencil_box<const D: usize>(shape: Shape) {
     let f = shape.build::<D>().unwrap();
     let grid = grid_for::<D>(f.as_ref());
@@ -348,6 +349,21 @@ fn check_stencil_box<const D: usize>(shape: Shape) {
             };
             assert_eq!(bits(&filled), bits(&stored), "{shape:?}");
             let t = t.local();
+            // The nodes in support as VC's passes read them from the factors
+            // (`TensorFactors::for_each_in_support`): the stored ones in slot order, bit for
+            // bit, without the nodes that leave the support (on nodes and cell centres).
+            let factors = t.tensor_factors().unwrap();
+            let key = |n: usize, w: f64, g: Vector<D>| (n, w.to_bits(), g.map(f64::to_bits));
+            for p in 0..pts.len() {
+                let (ns, ws, gs) = stored.of(p);
+                let listed: Vec<_> = (0..len)
+                    .filter(|&s| in_support(ws[s], &gs[s]))
+                    .map(|s| key(ns[s], ws[s], gs[s]))
+                    .collect();
+                let mut factored = Vec::new();
+                factors.for_each_in_support(p, |s| factored.push(key(s.node, s.value, s.gradient)));
+                assert_eq!(factored, listed, "{shape:?}");
+            }
             check(&|p, f| {
                 t.for_each(p, |s, node| {
                     f(s, node, t.offset(&grid, p, s, node.node, &pts[p]))

@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::grid::GridNodes;
 use crate::integration::{BoundaryPoints, VcCorrection, VcInputs};
 use crate::options::Contact;
-use crate::shape::{StencilView, Stencils};
+use crate::shape::{StencilView, Stencils, SupportNodes};
 use crate::Vector;
 
 /// The node fields of the bodies under contact, kept between steps.
@@ -95,7 +95,9 @@ pub(super) fn particle_to_grid_per_body<const D: usize, S: StencilView<D>>(
             let in_body = |p: usize| material[p] == b as u32;
             let (found, n) = (vc.bodies(), ps.len());
             let walls = inputs.walls;
-            super::vc_torque::remove_vc_torque(grid, walls, stored, n, in_body, found, nodes);
+            let tensor = inputs.stencils.tensor_factors();
+            let support = SupportNodes { stored, tensor };
+            super::vc_torque::remove_vc_torque(grid, walls, support, n, in_body, found, nodes);
         }
     }
     bodies.mass_floor.last().copied().unwrap_or(0.0)

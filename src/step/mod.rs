@@ -407,8 +407,12 @@ impl<const D: usize> Step<'_, D> {
         if let Some(stored) = stored.as_mut() {
             stored.lanes = stencils.lanes;
             // The shape is the B-spline of width `W` on the lattice (`tensor_order`): its
-            // lists from the factors just computed, not evaluated again.
-            stored.fill_from_factors(&stencils);
+            // lists from the factors just computed, not evaluated again; none where VC reads
+            // the factors (`VcCorrection::reads_lists`).
+            match self.vc.as_ref().is_some_and(|vc| vc.reads_lists()) {
+                true => stored.fill_from_factors(&stencils),
+                false => stored.clear(),
+            }
             self.work.times.shape += lap(&mut clock);
         }
         (stencils, stored)

@@ -13,7 +13,7 @@ use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::options::Shape;
 use crate::particles::Particles;
-use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils};
+use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils, SupportNodes};
 use crate::{Matrix, Vector};
 
 /// Phase 3: the particles' mass, momentum and force to the grid: to the one field, with VC's
@@ -66,10 +66,11 @@ pub(super) fn phase<const D: usize, S: StencilView<D>>(
     if let (Some(vc), Some(stored)) = (vc, inputs.stored) {
         let (walls, all) = (inputs.walls, |_| true);
         let found = vc.bodies();
+        let tensor = inputs.stencils.tensor_factors();
         super::vc_torque::remove_vc_torque(
             grid,
             walls,
-            stored,
+            SupportNodes { stored, tensor },
             ps.len(),
             all,
             found,
@@ -178,6 +179,11 @@ where
     );
     let (deformation_gradient, reference_volume) =
         (&ps.deformation_gradient[..], &ps.reference_volume[..]);
+    // VC's correction at the nodes of each support, from the factors where there are some.
+    let support = shape.map(|stored| SupportNodes {
+        stored,
+        tensor: stencils.tensor_factors(),
+    });
     let stencils = stencils.local();
     let lanes = stencils.lanes();
     let scatter = crate::cpu::inlined(
@@ -267,9 +273,9 @@ where
             };
             // SAFETY: as above.
             if unsafe { stencils.scatter(p, &input, &out) } {
-                if let (Some(vc), Some((vs, _)), Some(stored)) = (vc, force, shape) {
+                if let (Some(vc), Some((vs, _)), Some(support)) = (vc, force, &support) {
                     // SAFETY: as above (the same stencil's nodes).
-                    unsafe { scatter_vc_correction(grid, vc, stored, p, &xp, vs, &out) };
+                    unsafe { scatter_vc_correction(grid, vc, support, p, &xp, vs, &out) };
                 }
                 return;
             }
@@ -310,18 +316,18 @@ where
 unsafe fn scatter_vc_correction<const D: usize>(
     grid: &Grid<D>,
     vc: &VcCorrection<D>,
-    stored: &Stencils<D>,
+    support: &SupportNodes<D>,
     p: usize,
     xp: &Vector<D>,
     vs: Matrix<D>,
     out: &NodeScatter<D>,
 ) {
-    let (nodes, values, _) = stored.of(p);
-    for (&n, &w) in nodes.iter().zip(values) {
+    support.for_each(p, |s| {
+        let (n, w) = (s.node, s.value);
         if w != 0.0 {
             let correction = vc.gradient_correction_at(grid, out.slot[n], n, p, xp, w);
             // SAFETY: the caller's.
             unsafe { scatter_add(out.force, n, vs * correction) };
         }
-    }
+    });
 }

@@ -33,7 +33,7 @@ use super::grid_update::{edge_mass_floor, rigid_acceleration};
 use crate::grid::{Grid, GridNodes};
 use crate::integration::bodies;
 use crate::options::Walls;
-use crate::shape::Stencils;
+use crate::shape::SupportNodes;
 use crate::{Matrix, Vector};
 
 /// Removes the torque of the internal forces in `nodes.force` per connected body of the
@@ -43,7 +43,7 @@ use crate::{Matrix, Vector};
 pub(super) fn remove_vc_torque<const D: usize>(
     grid: &Grid<D>,
     walls: &Walls<D>,
-    stencils: &Stencils<D>,
+    stencils: SupportNodes<D>,
     particles: usize,
     in_field: impl Fn(usize) -> bool + Sync,
     found: &[usize],
@@ -63,11 +63,7 @@ pub(super) fn remove_vc_torque<const D: usize>(
         let nodes = &*nodes;
         computed = bodies(slots, particles, |p, visit: &mut dyn FnMut(usize)| {
             if in_field(p) {
-                stencils.for_each_shape(p, |_, s| {
-                    if s.in_support() {
-                        visit(nodes.slot(s.node));
-                    }
-                });
+                stencils.for_each(p, |s| visit(nodes.slot(s.node)));
             }
         });
         &computed
