@@ -243,16 +243,27 @@ impl<const D: usize> TensorFactors<'_, D> {
                     gradient,
                 });
             }
-            for (ka, stride) in k.iter_mut().zip(self.strides) {
-                *ka += 1;
-                node += stride;
-                if *ka < W {
-                    break;
-                }
-                *ka = 0;
-                node -= W * stride;
-            }
+            next_in_box::<D, W>(&mut k, &mut node, &self.strides);
         }
+    }
+}
+
+/// The next node of a stencil box in slot order (axis 0 fastest): its multi-index `k` in the
+/// box and its storage index `node`.
+#[inline(always)]
+fn next_in_box<const D: usize, const W: usize>(
+    k: &mut [usize; D],
+    node: &mut usize,
+    strides: &[usize; D],
+) {
+    for (ka, stride) in k.iter_mut().zip(strides) {
+        *ka += 1;
+        *node += stride;
+        if *ka < W {
+            break;
+        }
+        *ka = 0;
+        *node -= W * stride;
     }
 }
 
@@ -807,15 +818,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                 },
                 offset,
             );
-            for (ka, stride) in k.iter_mut().zip(self.strides) {
-                *ka += 1;
-                node += stride;
-                if *ka < W {
-                    break;
-                }
-                *ka = 0;
-                node -= W * stride;
-            }
+            next_in_box::<D, W>(&mut k, &mut node, &self.strides);
         }
     }
 }
