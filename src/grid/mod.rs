@@ -289,6 +289,13 @@ impl<const D: usize> GridNodes<D> {
             + self.active.capacity() * std::mem::size_of::<usize>()
     }
 
+    /// The slot of node `n` in `active`, if it is listed there.
+    #[inline]
+    pub fn slot_of(&self, n: usize) -> Option<usize> {
+        let slot = *self.slot.get(n)? as usize;
+        (self.active.get(slot) == Some(&n)).then_some(slot)
+    }
+
     /// Whether node `n` was written this step.
     #[inline]
     pub fn is_touched(&self, n: usize) -> bool {

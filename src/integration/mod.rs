@@ -1743,6 +1743,110 @@ impl<'a, const D: usize> NullSpace<'a, D> {
 
 /// The connected bodies of the nodes (slots) that particles join: `stencil(p, visit)` visits
 /// the slots of particle `p`'s support. Returns a body number per slot, numbered from 0.
+/// [`bodies`] for stencils that are whole boxes of a tensor product (`tensor`, B-splines):
+/// the same numbering from the cells the boxes cover instead of the nodes of every particle.
+/// Two nodes share a body when a chain of stencil boxes, each overlapping the next in a node,
+/// holds them; a box is the union of its cells, and two boxes overlap in a node exactly when
+/// their cells are joined by cells that share a corner. So the bodies are the components of the
+/// covered cells under corner contact, each active node in the component of a covered cell it is
+/// a corner of (a node that no particle's box holds, reached by boundary points only, its own
+/// body, as in [`bodies`]). The joins are those of the covered cells, not of the `W^D` nodes of
+/// every particle (2D 4 to 9 times fewer at the benchmark block's 2.4 particles a cell, 3D 6 to
+/// 27). `None` when a counted particle's support is not its whole box (a factor zero: a
+/// particle on a node or a cell centre), which [`bodies`] then takes.
+pub(crate) fn box_bodies<const D: usize>(
+    grid: &Grid<D>,
+    nodes: &GridNodes<D>,
+    tensor: &TensorFactors<'_, D>,
+    particles: usize,
+    counted: impl Fn(usize) -> bool + Sync,
+) -> Option<Vec<usize>> {
+    let (w, dims, strides) = (tensor.width, grid.dims(), grid.strides());
+    let whole = |p: usize| tensor.values(p).iter().all(|&v| v != 0.0);
+    if !(0..particles)
+        .into_par_iter()
+        .all(|p| !counted(p) || whole(p))
+    {
+        return None;
+    }
+    // By slot of the active nodes: the boxes' first nodes, then the cells they cover (by the
+    // cell's lower corner).
+    let slots = nodes.active.len();
+    let mut first = vec![false; slots];
+    for p in (0..particles).filter(|&p| counted(p)) {
+        first[nodes.slot_of(tensor.base(p))?] = true;
+    }
+    let corner =
+        |n: usize| -> [i64; D] { std::array::from_fn(|a| ((n / strides[a]) % dims[a]) as i64) };
+    // The slot of the node at `k + d` (storage multi-index `k`), if it is active.
+    let at = |k: &[i64; D], d: &[i64; D]| -> Option<usize> {
+        let mut m = 0usize;
+        for a in 0..D {
+            let j = k[a] + d[a];
+            if !(0..dims[a] as i64).contains(&j) {
+                return None;
+            }
+            m += j as usize * strides[a];
+        }
+        nodes.slot_of(m)
+    };
+    let mut covered = vec![false; slots];
+    let in_cell = |c: usize, e: usize| -> [i64; D] {
+        std::array::from_fn(|a| (c / e.pow(a as u32) % e) as i64)
+    };
+    for s in (0..slots).filter(|&s| first[s]) {
+        let k = corner(nodes.active[s]);
+        for c in 0..(w - 1).pow(D as u32) {
+            covered[at(&k, &in_cell(c, w - 1))?] = true;
+        }
+    }
+    // Components of the covered cells that share a corner: a join with each of the 3^D − 1
+    // neighbours listed after it (the offsets whose last nonzero entry is +1).
+    let mut parent: Vec<usize> = (0..slots).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let offsets: Vec<[i64; D]> = (0..3usize.pow(D as u32))
+        .map(|o| in_cell(o, 3).map(|x| x - 1))
+        .filter(|d| d.iter().rev().find(|&&x| x != 0) == Some(&1))
+        .collect();
+    for s in (0..slots).filter(|&s| covered[s]) {
+        let k = corner(nodes.active[s]);
+        for d in &offsets {
+            if let Some(t) = at(&k, d).filter(|&t| covered[t]) {
+                let (a, b) = (root(&mut parent, s), root(&mut parent, t));
+                if a != b {
+                    parent[b] = a;
+                }
+            }
+        }
+    }
+    // Each active node's body: that of a covered cell it is a corner of, numbered by first
+    // slot as `bodies` numbers; a node of no box keys by its own slot (not covered, so no
+    // covered cell's root).
+    let mut number = vec![usize::MAX; slots];
+    let mut next = 0;
+    Some(
+        (0..slots)
+            .map(|s| {
+                let k = corner(nodes.active[s]);
+                let cell = (0..1usize << D)
+                    .find_map(|c| at(&k, &in_cell(c, 2).map(|x| -x)).filter(|&t| covered[t]));
+                let key = cell.map_or(s, |cell| root(&mut parent, cell));
+                if number[key] == usize::MAX {
+                    number[key] = next;
+                    next += 1;
+                }
+                number[key]
+            })
+            .collect(),
+    )
+}
+
 pub(crate) fn bodies(
     slots: usize,
     particles: usize,

@@ -658,3 +658,73 @@ fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
         VcSolve::DEFAULT.max_iterations
     );
 }
+
+/// The bodies from the cells the stencil boxes cover (`box_bodies`) are those from every
+/// particle's nodes (`bodies`), numbering included, for the B-splines of every width in 2D and
+/// 3D: two boxes that share one corner node (one body), a box one node apart from both (its
+/// own), a random cloud, and a node that no box holds (as boundary points touch); `None` when a
+/// particle's support is not its whole box (a factor zero: on a node, or a cell centre).
+#[test]
+fn box_bodies_are_the_particles_bodies() {
+    use crate::shape::{BSpline, BSplineOrder, StencilView, TensorStencils};
+    fn check<const D: usize, const W: usize>(order: BSplineOrder) {
+        let mut grid = Grid::<D>::new(Vector::<D>::zeros(), [16; D], 1.0).unwrap();
+        grid.set_ghost_layers(2).unwrap();
+        // A particle whose stencil box starts at node `base` (its first node's offset from the
+        // particle, `(W − 2)/2` cells, is where the factors would vanish).
+        let at = |base: [f64; D], off: f64| {
+            Vector::<D>::from_fn(|a, _| base[a] + (W as f64 - 2.0) / 2.0 + off)
+        };
+        let corner = (W - 1) as f64;
+        let mut x = vec![
+            at([2.0; D], 0.2),
+            at([2.0 + corner; D], 0.2),
+            at(std::array::from_fn(|a| if a == 0 { 3.0 + 2.0 * corner } else { 2.0 }), 0.2),
+        ];
+        let mut rng = TestRng::new(11);
+        x.extend((0..60).map(|_| Vector::<D>::from_fn(|_, _| 10.0 + 2.0 * rng.uniform())));
+        let bodies_of = |x: &[Vector<D>], orphan: bool| {
+            let mut t = TensorStencils::<D, W>::default();
+            t.compute(&BSpline::new(order), &grid, x);
+            let view = t.local();
+            let mut nodes = GridNodes::<D>::default();
+            nodes.ensure(&grid, false, false, false).unwrap();
+            for p in 0..x.len() {
+                view.for_each(p, |_, s| {
+                    if s.in_support() {
+                        nodes.touch(s.node);
+                    }
+                });
+            }
+            if orphan {
+                nodes.touch(grid.node_index([15; D]));
+            }
+            let mut stored = Stencils::<D>::default();
+            stored.fill_from_factors(&t);
+            let n = x.len();
+            let expected = bodies(nodes.active.len(), n, |p, visit: &mut dyn FnMut(usize)| {
+                stored.for_each_shape(p, |_, s| {
+                    if s.in_support() {
+                        visit(nodes.slot(s.node))
+                    }
+                })
+            });
+            let factors = view.tensor_factors().unwrap();
+            (box_bodies(&grid, &nodes, &factors, n, |_| true), expected)
+        };
+        for orphan in [false, true] {
+            let (from_boxes, expected) = bodies_of(&x, orphan);
+            assert_eq!(from_boxes.as_ref(), Some(&expected), "{order:?} {D}D");
+            let count = expected.iter().max().unwrap() + 1;
+            assert_eq!(count, 3 + usize::from(orphan), "{order:?} {D}D");
+        }
+        x.push(at([5.0; D], 0.0));
+        assert_eq!(bodies_of(&x, false).0, None, "{order:?} {D}D");
+    }
+    check::<2, 2>(BSplineOrder::Linear);
+    check::<2, 3>(BSplineOrder::Quadratic);
+    check::<2, 4>(BSplineOrder::Cubic);
+    check::<3, 2>(BSplineOrder::Linear);
+    check::<3, 3>(BSplineOrder::Quadratic);
+    check::<3, 4>(BSplineOrder::Cubic);
+}

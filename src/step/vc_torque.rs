@@ -31,7 +31,7 @@
 
 use super::grid_update::{edge_mass_floor, rigid_acceleration};
 use crate::grid::{Grid, GridNodes};
-use crate::integration::bodies;
+use crate::integration::{bodies, box_bodies};
 use crate::options::Walls;
 use crate::shape::SupportNodes;
 use crate::{Matrix, Vector};
@@ -61,10 +61,16 @@ pub(super) fn remove_vc_torque<const D: usize>(
         found
     } else {
         let nodes = &*nodes;
-        computed = bodies(slots, particles, |p, visit: &mut dyn FnMut(usize)| {
-            if in_field(p) {
-                stencils.for_each(p, |s| visit(nodes.slot(s.node)));
-            }
+        let from_boxes = stencils
+            .tensor
+            .as_ref()
+            .and_then(|t| box_bodies(grid, nodes, t, particles, &in_field));
+        computed = from_boxes.unwrap_or_else(|| {
+            bodies(slots, particles, |p, visit: &mut dyn FnMut(usize)| {
+                if in_field(p) {
+                    stencils.for_each(p, |s| visit(nodes.slot(s.node)));
+                }
+            })
         });
         &computed
     };
