@@ -662,7 +662,10 @@ impl<const D: usize> VcCorrection<D> {
             }
         }
         let slots = nodes.active.len();
-        for (v, per) in [(&mut self.moment, m * m), (&mut self.xi, m * D)] {
+        // A step between solves (`VcSolve::interval`) takes no right-hand side.
+        let between_solves = self.between_solves(body.is_some());
+        let rhs = if between_solves { 0 } else { m * D };
+        for (v, per) in [(&mut self.moment, m * m), (&mut self.xi, rhs)] {
             v.clear();
             v.resize(slots * per, 0.0);
         }
@@ -680,6 +683,7 @@ impl<const D: usize> VcCorrection<D> {
             // Order 1: Q = 1 and ∇Q = 0, so the sums take neither a position nor the test
             // function: A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I. Higher orders take the general sums
             // below.
+            // Between solves only the moment (the reach that bounds the carried coefficients).
             let first_order = |p: usize| {
                 let v = volumes[p];
                 support.for_each(p, |s| {
@@ -687,9 +691,11 @@ impl<const D: usize> VcCorrection<D> {
                     // SAFETY: as below.
                     unsafe {
                         moment.range(slot, 1)[0] += v * s.value.abs();
-                        let r = xi.range(slot * D, D);
-                        for (r, g) in r.iter_mut().zip(s.gradient.iter()) {
-                            *r -= v * g;
+                        if !between_solves {
+                            let r = xi.range(slot * D, D);
+                            for (r, g) in r.iter_mut().zip(s.gradient.iter()) {
+                                *r -= v * g;
+                            }
                         }
                         used.range(slot, 1)[0] = true;
                     }
@@ -740,7 +746,7 @@ impl<const D: usize> VcCorrection<D> {
         // Boundary sums: rhs_Ik += Ψ_I Q (n a)_k, only at nodes whose support meets a point.
         let mut q = [0.0; MAX_BASIS];
         let mut blended = Vec::new();
-        for b in 0..boundary.len() {
+        for b in (0..boundary.len()).filter(|_| !between_solves) {
             let (ns, ws, _) = boundary_stencils.of(b);
             let na = boundary.area_normal[b];
             // The test function at the point: the transfer weights `Φ` for signed shapes.
@@ -807,14 +813,13 @@ impl<const D: usize> VcCorrection<D> {
         // at order 1 only (order-2 coefficients carried to moved particles: jittered RK2 + VC2
         // 54 % off at 16 cells, a free block unstable), and not per body under contact (those
         // corrections are not committed with the step).
-        let interval = self.solve.interval;
-        let carry = interval > 1 && body.is_none() && m == 1;
+        let carry = self.solve.interval > 1 && body.is_none() && m == 1;
         if !carry {
             self.carried.clear();
         }
         self.proposed = None;
         let carried = !self.carried.is_empty();
-        let reuse = carry && carried && self.carried.age + 1 < interval;
+        let reuse = self.between_solves(body.is_some());
         // The preconditioner: per node, A_I's Cholesky factor, or the constant part alone for
         // a node whose moment matrix is singular (marked reduced) or of order 1.
         let factors: Vec<Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>> = self
@@ -1321,6 +1326,18 @@ impl<const D: usize> VcCorrection<D> {
         if weak == 0.0 {
             self.body_of = body_of;
         }
+    }
+
+    /// Whether this step takes the coefficients carried from the last solve instead of
+    /// solving (`VcSolve::interval`): at order 1, for the one field (not `per_body` under
+    /// contact), while the carried solve is younger than the interval.
+    fn between_solves(&self, per_body: bool) -> bool {
+        let interval = self.solve.interval;
+        interval > 1
+            && !per_body
+            && self.m() == 1
+            && !self.carried.is_empty()
+            && self.carried.age + 1 < interval
     }
 
     /// At order 1, bounds each node's correction (`first_order_correction_bound`) by its reach

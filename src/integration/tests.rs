@@ -679,7 +679,10 @@ fn box_bodies_are_the_particles_bodies() {
         let mut x = vec![
             at([2.0; D], 0.2),
             at([2.0 + corner; D], 0.2),
-            at(std::array::from_fn(|a| if a == 0 { 3.0 + 2.0 * corner } else { 2.0 }), 0.2),
+            at(
+                std::array::from_fn(|a| if a == 0 { 3.0 + 2.0 * corner } else { 2.0 }),
+                0.2,
+            ),
         ];
         let mut rng = TestRng::new(11);
         x.extend((0..60).map(|_| Vector::<D>::from_fn(|_, _| 10.0 + 2.0 * rng.uniform())));
