@@ -1003,6 +1003,20 @@ impl<const D: usize> VcCorrection<D> {
                     *mu = supports.fit(p, zeta);
                     return;
                 }
+                // The mean fit: the weighted mean of the coefficients (nodes of zero value
+                // weigh nothing).
+                if m == 1 && !linear_fit {
+                    support.for_each_value(p, |n, w| {
+                        let w = w.abs();
+                        weight += w;
+                        let z = &zeta[nodes.slot(n) * D..];
+                        *mu += w * Vector::<D>::from_fn(|k, _| z[k]);
+                    });
+                    if weight > 0.0 {
+                        *mu /= weight;
+                    }
+                    return;
+                }
                 support.for_each(p, |s| {
                     let w = s.value.abs();
                     weight += w;

@@ -226,6 +226,38 @@ impl<const D: usize> TensorFactors<'_, D> {
         }
     }
 
+    /// Calls `f(node, value)` for the nodes of particle `p`'s stencil where the value is not
+    /// zero, in slot order, with the value of [`TensorFactors::for_each_in_support`] (the same
+    /// bits) and no gradient computed.
+    #[inline(always)]
+    pub fn for_each_value(&self, p: usize, f: impl FnMut(usize, f64)) {
+        match self.width {
+            2 => self.visit_values::<2>(p, f),
+            3 => self.visit_values::<3>(p, f),
+            4 => self.visit_values::<4>(p, f),
+            w => unreachable!("B-spline stencils of width {w}"),
+        }
+    }
+
+    #[inline(always)]
+    fn visit_values<const W: usize>(&self, p: usize, mut f: impl FnMut(usize, f64)) {
+        let v = self.values(p);
+        let w: [[f64; W]; D] = std::array::from_fn(|a| std::array::from_fn(|k| v[a * W + k]));
+        let mut k = [0usize; D];
+        let mut node = self.base(p);
+        for _ in 0..W.pow(D as u32) {
+            // As `tensor_product` takes it: in ascending axis order, from one.
+            let mut value = 1.0;
+            for a in 0..D {
+                value *= w[a][k[a]];
+            }
+            if value != 0.0 {
+                f(node, value);
+            }
+            next_in_box::<D, W>(&mut k, &mut node, &self.strides);
+        }
+    }
+
     #[inline(always)]
     fn visit<const W: usize>(&self, p: usize, mut f: impl FnMut(StencilNode<D>)) {
         let factors = |v: &[f64]| -> [[f64; W]; D] {
@@ -289,6 +321,23 @@ impl<const D: usize> SupportNodes<'_, D> {
                     f(s)
                 }
             }),
+        }
+    }
+
+    /// Calls `f(node, value)` for every node of particle `p`'s stencil where the shape
+    /// function's value is not zero (no gradient computed from factors).
+    #[inline(always)]
+    pub fn for_each_value(&self, p: usize, mut f: impl FnMut(usize, f64)) {
+        match &self.tensor {
+            Some(tensor) => tensor.for_each_value(p, f),
+            None => {
+                let (nodes, values, _) = self.stored.of(p);
+                for (&n, &w) in nodes.iter().zip(values) {
+                    if w != 0.0 {
+                        f(n, w)
+                    }
+                }
+            }
         }
     }
 }

@@ -277,7 +277,8 @@ type Visitor<'a, const D: usize> = dyn FnMut(usize, StencilNode<D>, Vector<D>) +
 /// `ShapeFunction::stencil_origin` and `stencil_width` (the coloured particle-to-grid map writes
 /// only there), and the 1D factors of B-splines (and of RK1 with ã = 2) give the stored values
 /// bit for bit, read as factors or filled into the lists (`Stencils::fill_from_factors`), the
-/// nodes in support too (`TensorFactors::for_each_in_support`).
+/// nodes in support and the nonzero values too (`TensorFactors::for_each_in_support`,
+/// `for_each_value`).
 fn check_stencil_box<const D: usize>(shape: Shape) {
     let f = shape.build::<D>().unwrap();
     let grid = grid_for::<D>(f.as_ref());
@@ -363,6 +364,14 @@ fn check_stencil_box<const D: usize>(shape: Shape) {
                 let mut factored = Vec::new();
                 factors.for_each_in_support(p, |s| factored.push(key(s.node, s.value, s.gradient)));
                 assert_eq!(factored, listed, "{shape:?}");
+                // The nonzero values alone (`TensorFactors::for_each_value`).
+                let nonzero: Vec<_> = (0..len)
+                    .filter(|&s| ws[s] != 0.0)
+                    .map(|s| (ns[s], ws[s].to_bits()))
+                    .collect();
+                let mut values = Vec::new();
+                factors.for_each_value(p, |n, w| values.push((n, w.to_bits())));
+                assert_eq!(values, nonzero, "{shape:?}");
             }
             check(&|p, f| {
                 t.for_each(p, |s, node| {

@@ -322,12 +322,9 @@ unsafe fn scatter_vc_correction<const D: usize>(
     vs: Matrix<D>,
     out: &NodeScatter<D>,
 ) {
-    support.for_each(p, |s| {
-        let (n, w) = (s.node, s.value);
-        if w != 0.0 {
-            let correction = vc.gradient_correction_at(grid, out.slot[n], n, p, xp, w);
-            // SAFETY: the caller's.
-            unsafe { scatter_add(out.force, n, vs * correction) };
-        }
+    support.for_each_value(p, |n, w| {
+        let correction = vc.gradient_correction_at(grid, out.slot[n], n, p, xp, w);
+        // SAFETY: the caller's.
+        unsafe { scatter_add(out.force, n, vs * correction) };
     });
 }
