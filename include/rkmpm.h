@@ -51,7 +51,8 @@
 
 /**
  * Every how many steps VC's solve runs in a new simulation (`rkmpm_sim_set_vc_solve_interval`):
- * at every step, but with RK shape functions at order 1 `RKMPM_RK_VC_SOLVE_INTERVAL`.
+ * at every step, but at order 1 `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` with B-splines and
+ * `RKMPM_RK_VC_SOLVE_INTERVAL` with RK shape functions.
  */
 #define RKMPM_DEFAULT_VC_SOLVE_INTERVAL 1
 
@@ -60,6 +61,11 @@
  * the steps between taking the last solve's coefficients.
  */
 #define RKMPM_RK_VC_SOLVE_INTERVAL 4
+
+/**
+ * As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
+ */
+#define RKMPM_BSPLINE_VC_SOLVE_INTERVAL 2
 
 /**
  * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
@@ -912,10 +918,11 @@ enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
  * `steps` >= 1 steps, the steps between taking the last solve's coefficients, carried by grid
  * node (the next solve starts from them); 1 solves at every step. Order 1 only, without
  * contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
- * Without it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but with
- * RK shape functions at order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` (4) steps, the convergence
- * study's errors within 0.5 % of a solve at every step (docs/convergence/FINDINGS.md; with
- * B-splines a carried solve moves the energy-norm error by 1.7 % at fixed walls). Linear and
+ * Between solves the coefficients go on along the line through the last two solves. Without
+ * it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
+ * every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
+ * `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions, the convergence study's errors
+ * within 0.6 % of a solve at every step (docs/convergence/FINDINGS.md). Linear and
  * angular momentum are conserved whatever the interval. Keeps the tolerance and the
  * iteration bound in force (`rkmpm_sim_set_vc_solve`). May change between steps; part of a
  * checkpoint, with the carried coefficients. A refused value changes nothing.

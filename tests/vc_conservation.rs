@@ -695,7 +695,12 @@ fn a_loose_vc_solve_still_conserves_momentum() {
 #[test]
 fn the_vc_solve_rule_is_checked() {
     let mut sim = free_block::<2>(Shape::BSpline2, 1, Transfer::Apic);
-    assert_eq!(sim.vc_solve(), VcSolve::default());
+    // The automatic rule of the quadratic B-spline at order 1.
+    let automatic = VcSolve {
+        interval: VcSolve::BSPLINE_INTERVAL,
+        ..VcSolve::default()
+    };
+    assert_eq!(sim.vc_solve(), automatic);
     let rule = VcSolve {
         tolerance: 1e-4,
         max_iterations: 7,

@@ -49,10 +49,12 @@ module rkmpm
    real(c_double), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_TOLERANCE = 1.0e-4_c_double
    integer(c_int64_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS = 2000
    ! Every how many steps VC's solve runs in a new simulation (sim%set_vc_solve_interval changes
-   ! it): every step, but with RK shape functions at order 1 RKMPM_RK_VC_SOLVE_INTERVAL steps,
-   ! the steps between taking the last solve's coefficients.
+   ! it): every step, but at order 1 RKMPM_BSPLINE_VC_SOLVE_INTERVAL steps with B-splines and
+   ! RKMPM_RK_VC_SOLVE_INTERVAL with RK shape functions, the steps between taking the last
+   ! solve's coefficients.
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_INTERVAL = 1
    integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 4
+   integer(c_int32_t), parameter, public :: RKMPM_BSPLINE_VC_SOLVE_INTERVAL = 2
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4
@@ -1424,9 +1426,11 @@ contains
       if (present(errmsg)) errmsg = text
    end subroutine sim_vc_solve
 
-   !> Every how many steps VC's solve runs (default every step, RKMPM_RK_VC_SOLVE_INTERVAL, 4,
-   !> with RK shape functions at order 1; order >= 2 and contact solve at every step): the steps
-   !> between take the last solve's coefficients, carried by grid node. Momentum is conserved
+   !> Every how many steps VC's solve runs (default every step, at order 1
+   !> RKMPM_BSPLINE_VC_SOLVE_INTERVAL, 2, with B-splines and RKMPM_RK_VC_SOLVE_INTERVAL, 4, with
+   !> RK shape functions; order >= 2 and contact solve at every step): the steps between take
+   !> the last solve's coefficients, carried by grid node along the line through the last two
+   !> solves. Momentum is conserved
    !> whatever the interval.
    !> Keeps the tolerance and iteration bound in force. steps < 1 is refused. Part of a
    !> checkpoint.

@@ -44,13 +44,17 @@ pub const RKMPM_DEFAULT_VC_SOLVE_TOLERANCE: f64 = 1e-4;
 pub const RKMPM_DEFAULT_VC_SURFACE_REFRESH: u32 = 4;
 const _: () = assert!(RKMPM_DEFAULT_VC_SURFACE_REFRESH == rkmpm::DEFAULT_VC_SURFACE_REFRESH);
 /// Every how many steps VC's solve runs in a new simulation (`rkmpm_sim_set_vc_solve_interval`):
-/// at every step, but with RK shape functions at order 1 `RKMPM_RK_VC_SOLVE_INTERVAL`.
+/// at every step, but at order 1 `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` with B-splines and
+/// `RKMPM_RK_VC_SOLVE_INTERVAL` with RK shape functions.
 pub const RKMPM_DEFAULT_VC_SOLVE_INTERVAL: u32 = 1;
 const _: () = assert!(RKMPM_DEFAULT_VC_SOLVE_INTERVAL == rkmpm::VcSolve::DEFAULT.interval);
 /// Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
 /// the steps between taking the last solve's coefficients.
 pub const RKMPM_RK_VC_SOLVE_INTERVAL: u32 = 4;
 const _: () = assert!(RKMPM_RK_VC_SOLVE_INTERVAL == rkmpm::VcSolve::RK_INTERVAL);
+/// As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
+pub const RKMPM_BSPLINE_VC_SOLVE_INTERVAL: u32 = 2;
+const _: () = assert!(RKMPM_BSPLINE_VC_SOLVE_INTERVAL == rkmpm::VcSolve::BSPLINE_INTERVAL);
 /// The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
 pub const RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS: u64 = 2000;
 const _: () = assert!(
@@ -1284,10 +1288,11 @@ pub unsafe extern "C" fn rkmpm_sim_set_vc_solve(
 /// `steps` >= 1 steps, the steps between taking the last solve's coefficients, carried by grid
 /// node (the next solve starts from them); 1 solves at every step. Order 1 only, without
 /// contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
-/// Without it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but with
-/// RK shape functions at order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` (4) steps, the convergence
-/// study's errors within 0.5 % of a solve at every step (docs/convergence/FINDINGS.md; with
-/// B-splines a carried solve moves the energy-norm error by 1.7 % at fixed walls). Linear and
+/// Between solves the coefficients go on along the line through the last two solves. Without
+/// it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
+/// every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
+/// `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions, the convergence study's errors
+/// within 0.6 % of a solve at every step (docs/convergence/FINDINGS.md). Linear and
 /// angular momentum are conserved whatever the interval. Keeps the tolerance and the
 /// iteration bound in force (`rkmpm_sim_set_vc_solve`). May change between steps; part of a
 /// checkpoint, with the carried coefficients. A refused value changes nothing.

@@ -1022,7 +1022,8 @@ static void lifetime_rows(void) {
     CALL(f.sim, rkmpm_sim_vc_solve_interval(f.sim, NULL));
     uint32_t steps = 0;
     RKMPM_CHECK(rkmpm_sim_vc_solve_interval(f.sim, &steps));
-    EXPECT(steps == RKMPM_DEFAULT_VC_SOLVE_INTERVAL, "the default interval is %u",
+    /* The automatic rule of the default shape, the quadratic B-spline, at order 1. */
+    EXPECT(steps == RKMPM_BSPLINE_VC_SOLVE_INTERVAL, "the default interval is %u",
            (unsigned)steps);
     drop(&f);
   }

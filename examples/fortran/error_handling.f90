@@ -181,7 +181,8 @@ program error_handling
    call expect(st, RKMPM_OK, msg, 'VC solve rule')
    call expect_true(tolerance == RKMPM_DEFAULT_VC_SOLVE_TOLERANCE .and. &
                     iterations == RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS, 'default VC solve rule')
-   call expect_true(sim%vc_solve_interval() == RKMPM_DEFAULT_VC_SOLVE_INTERVAL, &
+   ! The automatic rule of the default shape, the quadratic B-spline, at order 1.
+   call expect_true(sim%vc_solve_interval() == RKMPM_BSPLINE_VC_SOLVE_INTERVAL, &
                     'default VC solve interval')
    call sim%set_vc_solve_interval(-2_c_int32_t, stat=st, errmsg=msg)
    call expect(st, RKMPM_ERR_INVALID_ARGUMENT, msg, 'VC solve interval of -2 steps')

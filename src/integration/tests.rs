@@ -633,14 +633,23 @@ fn bodies_are_the_components_on_any_number_of_threads() {
 }
 
 /// The automatic rule: 1e-4 at order 1, solving every `RK_INTERVAL` steps with RK shape
-/// functions and at every step with the others; at order ≥ 2 1e-4 to 32 cells across, then
-/// `1e-4 (32 / N)^3`, never below the exact solve's tolerance, at every step.
+/// functions, every `BSPLINE_INTERVAL` with B-splines and at every step with linear hats; at
+/// order ≥ 2 1e-4 to 32 cells across, then `1e-4 (32 / N)^3`, never below the exact solve's
+/// tolerance, at every step.
 #[test]
 fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
     use crate::options::ShapeKind;
     for cells in [1, 32, 64, 100_000] {
-        for shape in [ShapeKind::Linear, ShapeKind::Bspline2, ShapeKind::Bspline3] {
-            assert_eq!(VcSolve::automatic(1, cells, shape), VcSolve::DEFAULT);
+        assert_eq!(
+            VcSolve::automatic(1, cells, ShapeKind::Linear),
+            VcSolve::DEFAULT
+        );
+        for shape in [ShapeKind::Bspline2, ShapeKind::Bspline3] {
+            let bspline = VcSolve::automatic(1, cells, shape);
+            assert_eq!(
+                (bspline.tolerance, bspline.interval),
+                (1e-4, VcSolve::BSPLINE_INTERVAL)
+            );
         }
         let rk = VcSolve::automatic(1, cells, ShapeKind::Rk);
         assert_eq!((rk.tolerance, rk.interval), (1e-4, VcSolve::RK_INTERVAL));

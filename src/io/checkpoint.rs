@@ -47,7 +47,10 @@ const MAGIC: &[u8; 8] = b"RKMPMCHK";
 /// and the coefficients carried by node between solves with their age, for an exact restart;
 /// older files load with a given rule solving at every step, as they ran, and solve at their
 /// first step.
-pub const CHECKPOINT_VERSION: u32 = 7;
+/// Version 8 adds the solve before the carried one (the steps between them, its nodes and
+/// values), along whose line the carried coefficients go on; version 7 files load without it
+/// (held constant until the next two solves).
+pub const CHECKPOINT_VERSION: u32 = 8;
 
 /// Writes boundary points: positions, reference and current area normals, deformation
 /// gradients and tractions.
@@ -560,6 +563,14 @@ impl<const D: usize> Sim<D> {
                 w.u64(n as u64);
                 w.f64s(v);
             }
+            if version >= 8 {
+                w.u32(carried.map_or(0, |c| c.span()));
+                w.len(carried.map_or(0, |c| c.entries_before().count()));
+                for (n, v) in carried.iter().flat_map(|c| c.entries_before()) {
+                    w.u64(n as u64);
+                    w.f64s(v);
+                }
+            }
         }
         let payload = w.0;
         let mut out = Vec::with_capacity(payload.len() + 28);
@@ -700,25 +711,42 @@ impl<const D: usize> Sim<D> {
             }
             let age = r.u32()?;
             let per = r.len(8)?;
-            let count = r.len(8 * (per + 1))?;
             let node_count = sim.grid.node_count();
-            let (mut nodes, mut values) =
-                (Vec::with_capacity(count), Vec::with_capacity(count * per));
-            for _ in 0..count {
-                let n = r.u64()?;
-                if n >= node_count as u64 {
-                    return Err(corrupt(format!("carried VC coefficients at node {n}")));
+            // A solve's nodes and values, `per` a node.
+            let read_solve = |r: &mut Reader| -> Result<(Vec<usize>, Vec<f64>)> {
+                let count = r.len(8 * (per + 1))?;
+                let (mut nodes, mut values) =
+                    (Vec::with_capacity(count), Vec::with_capacity(count * per));
+                for _ in 0..count {
+                    let n = r.u64()?;
+                    if n >= node_count as u64 {
+                        return Err(corrupt(format!("carried VC coefficients at node {n}")));
+                    }
+                    nodes.push(n as usize);
+                    for _ in 0..per {
+                        values.push(r.f64()?);
+                    }
                 }
-                nodes.push(n as usize);
-                for _ in 0..per {
-                    values.push(r.f64()?);
-                }
-            }
+                Ok((nodes, values))
+            };
+            let (nodes, values) = read_solve(&mut r)?;
+            let (span, (before, before_values)) = match version >= 8 {
+                true => (r.u32()?, read_solve(&mut r)?),
+                false => (0, (Vec::new(), Vec::new())),
+            };
             match sim.vc.as_mut() {
                 Some(vc) => vc
-                    .restore_carried(nodes, &values, per, age, node_count)
+                    .restore_carried(
+                        (nodes, &values),
+                        (before, &before_values, span),
+                        per,
+                        age,
+                        node_count,
+                    )
                     .map_err(|e| corrupt(e.message))?,
-                None if count > 0 => return Err(corrupt("carried VC coefficients without VC")),
+                None if !nodes.is_empty() => {
+                    return Err(corrupt("carried VC coefficients without VC"))
+                }
                 None => {}
             }
         }
@@ -901,17 +929,26 @@ mod tests {
         refused_as_corrupt(&mut bytes, "refresh of zero steps");
     }
 
-    /// Bytes of format 7's tail: the solve's interval and the carried coefficients' age (4 bytes
-    /// each), their values a node and their count (8 each), then per node its index and values.
+    /// Bytes of the tail of formats 7 and 8: the solve's interval and the carried coefficients'
+    /// age (4 bytes each), their values a node and their count (8 each), then per node its index
+    /// and values; format 8's steps to the solve before (4), its count (8) and its nodes.
     fn carried_tail(sim: &Sim<2>) -> usize {
         let carried = sim.vc.as_ref().map(|vc| vc.carried());
-        4 + 4 + 8 + 8 + carried.map_or(0, |c| c.entries().count() * (1 + c.per()) * 8)
+        let solve = |count: usize| carried.map_or(0, |c| count * (1 + c.per()) * 8);
+        let count = |before: bool| {
+            carried.map_or(0, |c| match before {
+                true => c.entries_before().count(),
+                false => c.entries().count(),
+            })
+        };
+        4 + 4 + 8 + 8 + solve(count(false)) + 4 + 8 + solve(count(true))
     }
 
-    /// Format 7 keeps the solve's interval and the coefficients carried between solves: a run
-    /// saved between solves goes on as the uninterrupted run, bit for bit. A format-6 file
-    /// loads with its rule solving at every step, as it ran, and nothing carried; a carried
-    /// node outside the grid is a damaged file.
+    /// Format 7 keeps the solve's interval and the coefficients carried between solves, format 8
+    /// the solve before them too: a run saved between solves goes on as the uninterrupted run,
+    /// bit for bit. A format-7 file loads without the solve before, a format-6 file with its
+    /// rule solving at every step, as it ran, and nothing carried; a carried node outside the
+    /// grid is a damaged file.
     #[test]
     fn the_carried_coefficients_are_kept_from_format_7() {
         let mut sim = block();
@@ -923,16 +960,24 @@ mod tests {
         };
         sim.set_vc_solve(rule).unwrap();
         let dt = sim.stable_dt(0.3).unwrap();
-        for _ in 0..2 {
+        // Solves at steps 1 and 4.
+        for _ in 0..5 {
             sim.step(dt).unwrap();
         }
         let carried = |sim: &Sim<2>| sim.vc.as_ref().unwrap().carried().clone();
-        assert_eq!(carried(&sim).age, 1);
+        assert_eq!((carried(&sim).age, carried(&sim).span()), (1, 3));
         assert!(!carried(&sim).is_empty());
+        assert!(carried(&sim).entries_before().count() > 0);
+        let seven = Sim::<2>::from_checkpoint_bytes(&sim.encode(7)).unwrap();
+        assert_eq!(carried(&seven).span(), 0);
+        assert_eq!(
+            carried(&seven).entries().count(),
+            carried(&sim).entries().count()
+        );
         let mut copy = Sim::<2>::from_checkpoint_bytes(&sim.checkpoint_bytes()).unwrap();
         assert_eq!(copy.vc_solve(), rule);
         assert_eq!(carried(&copy), carried(&sim));
-        // Steps 3 (carried), 4 (a solve from the carried coefficients) and 5.
+        // Steps 6 (carried), 7 (a solve from the carried coefficients) and 8.
         for _ in 0..3 {
             sim.step(dt).unwrap();
             copy.step(dt).unwrap();
@@ -945,6 +990,15 @@ mod tests {
         // The first carried node's index follows the interval, age, size and count.
         let mut bytes = sim.checkpoint_bytes();
         let node = bytes.len() - 4 - carried_tail(&sim) + 24;
+        bytes[node..node + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+        refused_as_corrupt(&mut bytes, "carried VC coefficients at node");
+        // So does the first node of the solve before, after the span and its count.
+        let mut bytes = sim.checkpoint_bytes();
+        let c = carried(&sim);
+        let node = bytes.len() - 4 - carried_tail(&sim)
+            + 24
+            + c.entries().count() * (1 + c.per()) * 8
+            + 12;
         bytes[node..node + 8].copy_from_slice(&u64::MAX.to_le_bytes());
         refused_as_corrupt(&mut bytes, "carried VC coefficients at node");
     }

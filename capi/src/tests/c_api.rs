@@ -1090,7 +1090,8 @@ fn vc_solve_rule_through_the_c_api() {
             assert_eq!(rkmpm_sim_vc_solve_interval(s, &mut steps), RKMPM_OK);
             steps
         };
-        assert_eq!(interval(sim), RKMPM_DEFAULT_VC_SOLVE_INTERVAL);
+        // The automatic rule of the default shape, the quadratic B-spline, at order 1.
+        assert_eq!(interval(sim), RKMPM_BSPLINE_VC_SOLVE_INTERVAL);
         assert_eq!(
             rkmpm_sim_set_vc_solve_interval(sim, 0),
             RKMPM_ERR_INVALID_ARGUMENT
@@ -1105,16 +1106,16 @@ fn vc_solve_rule_through_the_c_api() {
             rkmpm_sim_vc_solve_interval(sim, null_mut()),
             RKMPM_ERR_NULL_POINTER
         );
-        assert_eq!(interval(sim), RKMPM_DEFAULT_VC_SOLVE_INTERVAL);
+        assert_eq!(interval(sim), RKMPM_BSPLINE_VC_SOLVE_INTERVAL);
         // The tolerance and the interval are set apart, each keeping the other.
-        assert_eq!(rkmpm_sim_set_vc_solve_interval(sim, 2), RKMPM_OK);
+        assert_eq!(rkmpm_sim_set_vc_solve_interval(sim, 3), RKMPM_OK);
         assert_eq!(rkmpm_sim_set_vc_solve(sim, 1e-6, 50), RKMPM_OK);
-        assert_eq!(interval(sim), 2);
+        assert_eq!(interval(sim), 3);
         assert_eq!(rkmpm_sim_save(sim, path.as_ptr()), RKMPM_OK);
         let mut copy = null_mut();
         assert_eq!(rkmpm_sim_load(path.as_ptr(), &mut copy), RKMPM_OK);
         assert_eq!(rule(copy), (1e-6, 50));
-        assert_eq!(interval(copy), 2);
+        assert_eq!(interval(copy), 3);
         rkmpm_sim_free(copy);
         rkmpm_sim_free(sim);
     }
