@@ -489,6 +489,34 @@ fn rejected_steps_keep_the_carried_surface_and_coefficients() {
     }
 }
 
+/// Solving every second step, a solve starts from the carried coefficients and stops once it
+/// has cut their residual tenfold (`VC_SOLVE_CARRIED_REDUCTION`): fewer iterations than the
+/// first solve, from zero to the tolerance, takes; and none between solves.
+#[test]
+fn solves_from_carried_coefficients_cut_their_residual() {
+    let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
+    sim.set_integration(crate::Integration::Vc { order: 1 })
+        .unwrap();
+    let solve = crate::VcSolve {
+        interval: 2,
+        ..sim.vc_solve()
+    };
+    sim.set_vc_solve(solve).unwrap();
+    let dt = sim.stable_dt(0.3).unwrap();
+    let mut iterations = Vec::new();
+    for _ in 0..12 {
+        sim.step(dt).unwrap();
+        iterations.push(sim.vc.as_ref().unwrap().iterations());
+    }
+    let first = iterations[0];
+    for (step, &n) in iterations.iter().enumerate().skip(1) {
+        match step % 2 {
+            0 => assert!(n >= 1 && n < first, "step {step}: {n} against {first}"),
+            _ => assert_eq!(n, 0, "step {step}"),
+        }
+    }
+}
+
 /// Spacing of [`block_by_columns`]: two particles per cell of the 32 × 32 unit grid.
 const BY_COLUMNS_SPACING: f64 = 1.0 / 64.0;
 
