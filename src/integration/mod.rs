@@ -1468,6 +1468,13 @@ impl<const D: usize> VcCorrection<D> {
         Ok(())
     }
 
+    /// At the start of a step: drops a solve proposed by an earlier step that was rejected
+    /// (before its commit), so that a step that does not solve this correction (contact on,
+    /// or another shape's grid since) cannot commit it.
+    pub fn discard_proposal(&mut self) {
+        self.proposed = None;
+    }
+
     /// At the commit of a step: its solve becomes the carried coefficients (on a grid of
     /// `node_count` nodes), or the carried ones age by a step.
     pub fn commit_step(&mut self, node_count: usize) {

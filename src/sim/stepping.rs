@@ -55,6 +55,9 @@ impl<const D: usize> Sim<D> {
         // thread handing each one over and sleeping until it ends (two thread switches per
         // pass, about a dozen passes per step), which shows most on small problems.
         // On the simulation's own pool when it has one ([`Sim::set_threads`]).
+        if let Some(vc) = self.vc.as_mut() {
+            vc.discard_proposal();
+        }
         let plan = self.surface_plan();
         match self.threads.clone() {
             Some(pool) => pool.scope(|_| self.step_of(plan).run(dt))?,

@@ -720,3 +720,19 @@ proptest! {
         }
     }
 }
+
+/// A sequence the fuzzing found: a VC step rejected after its solve (gravity of 1e6), then
+/// contact (whose bodies solve their own corrections) and the linear shape (a grid of fewer
+/// nodes), then a step. The rejected step's solve must not be committed by the next step.
+#[test]
+fn a_rejected_vc_solve_is_not_committed_by_a_later_step() {
+    let calls = vec![
+        Call::SetGravity([0.0, 0.0, 976236.8652031254]),
+        Call::SetIntegration(1, 1),
+        Call::Step(0.3769729261234349),
+        Call::SetContact(1, 0.0),
+        Call::SetShape(0, 0, 2.0),
+        Call::StepBy(0.0001),
+    ];
+    run_sequence(3, true, SeedBody::NeoHookean, &calls, FUZZ_MAX_STEPS).unwrap();
+}
