@@ -539,6 +539,14 @@ pub struct VcCorrection<const D: usize> {
     /// Per particle with the order-1 linear fit: its frame `(T_p, o_p)`, see [`linear_frame`]
     /// (empty with the mean fit).
     frame: Vec<(Matrix<D>, Vector<D>)>,
+    /// At order 1 with the mean fit on a tensor-product stencil (B-splines): the coefficients
+    /// `ζ` by grid node (valid at the active nodes), which particle to grid reads with the
+    /// stencil's factors, taking each particle's mean `μ_p` as it scatters
+    /// ([`VcCorrection::mean_fit_coefficients`]); `fit` is then not kept. Empty otherwise.
+    on_nodes: Vec<Vector<D>>,
+    /// At order 1, per grid node: the particle sums `A_I` and `rhs_I` (`1 + D` values, zero
+    /// between steps), taken in the pass that marks the nodes, before the nodes have slots.
+    node_sums: Vec<f64>,
     /// The last step's storage of the assembled `K`, reused (its pages already mapped).
     storage: OperatorStorage,
     /// At order ≥ 2 applied matrix-free: the particles' supports in the solve's terms.
@@ -601,6 +609,8 @@ impl<const D: usize> VcCorrection<D> {
             edge: Vec::new(),
             fit: Vec::new(),
             frame: Vec::new(),
+            on_nodes: Vec::new(),
+            node_sums: Vec::new(),
             storage: OperatorStorage::default(),
             supports: Supports::default(),
             body_of: Vec::new(),
@@ -673,16 +683,45 @@ impl<const D: usize> VcCorrection<D> {
                 });
             }
         };
+        // A step between solves (`VcSolve::interval`) takes no right-hand side.
+        let between_solves = self.between_solves(body.is_some());
         // The nodes: those of particle stencils (listed block by block), then those that only
-        // boundary points reach.
+        // boundary points reach. At order 1 the particle sums go with the marks, by node
+        // (`node_sums`): A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I (Q = 1 and ∇Q = 0: neither a
+        // position nor the test function), only A_I between solves (the reach that bounds the
+        // carried coefficients); each node's sums in the particles' order, as by slot.
+        let per = 1 + D;
+        if m == 1 {
+            self.node_sums.resize(nodes.mass.len() * per, 0.0);
+        }
         {
             let out = NodeScatter::new(nodes);
+            let sums = SharedSlice::new(&mut self.node_sums);
             by_colour(&|p| {
-                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                support.for_each(p, |s| unsafe { out.touch(s.node) })
+                if m > 1 {
+                    // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                    return support.for_each(p, |s| unsafe { out.touch(s.node) });
+                }
+                let v = volumes[p];
+                support.for_each(p, |s| {
+                    // SAFETY: blocks of one colour write disjoint nodes (`Bins`), and a node's
+                    // sums are its own range.
+                    unsafe {
+                        out.touch(s.node);
+                        let r = sums.range(s.node * per, per);
+                        r[0] += v * s.value.abs();
+                        if !between_solves {
+                            for (r, g) in r[1..].iter_mut().zip(s.gradient.iter()) {
+                                *r -= v * g;
+                            }
+                        }
+                    }
+                });
             });
         }
         bins.collect_active(grid, nodes);
+        // The nodes of particle stencils, listed before those of boundary points alone.
+        let reached = nodes.active.len();
         for b in 0..boundary.len() {
             let (ns, ws, _) = boundary_stencils.of(b);
             for (&n, &w) in ns.iter().zip(ws) {
@@ -692,8 +731,6 @@ impl<const D: usize> VcCorrection<D> {
             }
         }
         let slots = nodes.active.len();
-        // A step between solves (`VcSolve::interval`) takes no right-hand side.
-        let between_solves = self.between_solves(body.is_some());
         let rhs = if between_solves { 0 } else { m * D };
         for (v, per) in [(&mut self.moment, m * m), (&mut self.xi, rhs)] {
             v.clear();
@@ -703,38 +740,34 @@ impl<const D: usize> VcCorrection<D> {
             v.clear();
             v.resize(slots, false);
         }
-        // Particle sums: A_I += V Q Qᵀ; rhs_Ik −= V (∂_k Ψ Q + Ψ ∂_k Q).
-        {
+        if m == 1 {
+            // The node sums to the slots, and zero again for the next step.
+            let sums = SharedSlice::new(&mut self.node_sums);
+            let xi = SharedSlice::new(&mut self.xi);
+            let active = &nodes.active;
+            (self.moment.par_iter_mut().zip(self.used.par_iter_mut()))
+                .enumerate()
+                .take(reached)
+                .for_each(|(slot, (a, used))| {
+                    // SAFETY: every active node is listed once, and has a slot of its own.
+                    unsafe {
+                        let sum = sums.range(active[slot] * per, per);
+                        (*a, *used) = (sum[0], true);
+                        if !between_solves {
+                            xi.range(slot * D, D).copy_from_slice(&sum[1..]);
+                        }
+                        sum.fill(0.0);
+                    }
+                });
+        }
+        // Particle sums at order ≥ 2: A_I += V Q Qᵀ; rhs_Ik −= V (∂_k Ψ Q + Ψ ∂_k Q).
+        if m > 1 {
             let moment = SharedSlice::new(&mut self.moment);
             let xi = SharedSlice::new(&mut self.xi);
             let used = SharedSlice::new(&mut self.used);
             let nodes = &*nodes;
             let basis = &self.basis;
-            // Order 1: Q = 1 and ∇Q = 0, so the sums take neither a position nor the test
-            // function: A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I. Higher orders take the general sums
-            // below.
-            // Between solves only the moment (the reach that bounds the carried coefficients).
-            let first_order = |p: usize| {
-                let v = volumes[p];
-                support.for_each(p, |s| {
-                    let slot = nodes.slot(s.node);
-                    // SAFETY: as below.
-                    unsafe {
-                        moment.range(slot, 1)[0] += v * s.value.abs();
-                        if !between_solves {
-                            let r = xi.range(slot * D, D);
-                            for (r, g) in r.iter_mut().zip(s.gradient.iter()) {
-                                *r -= v * g;
-                            }
-                        }
-                        used.range(slot, 1)[0] = true;
-                    }
-                });
-            };
             by_colour(&|p| {
-                if m == 1 {
-                    return first_order(p);
-                }
                 let (mut q, mut dq) = ([0.0; MAX_BASIS], [0.0; 3 * MAX_BASIS]);
                 let v = volumes[p];
                 let phi = stencils.transfer_of(p);
@@ -1014,6 +1047,9 @@ impl<const D: usize> VcCorrection<D> {
                     z.iter_mut().for_each(|z| *z /= 1.0 + edge_damping[slot]);
                 });
         };
+        // With the mean fit on the B-spline factors particle to grid takes the fits itself
+        // (`mean_fit_coefficients`): the coefficients go to the nodes instead.
+        let on_nodes = m == 1 && !linear_fit && tensor.is_some();
         let mut fit = std::mem::take(&mut self.fit);
         fit.clear();
         fit.resize(
@@ -1077,7 +1113,13 @@ impl<const D: usize> VcCorrection<D> {
             let mut zeta = self.carried.at(&nodes.active, m * D);
             self.iterations = 0;
             self.bound_first_order(&mut zeta, reach, h);
-            fits(&zeta, &mut fit);
+            match on_nodes {
+                true => self.lay_on_nodes(&zeta, nodes, &mut fit),
+                false => {
+                    self.on_nodes.clear();
+                    fits(&zeta, &mut fit)
+                }
+            }
             self.keep(fit, frame, edge, zeta, supports);
             return;
         }
@@ -1372,7 +1414,13 @@ impl<const D: usize> VcCorrection<D> {
         }
         self.bound_first_order(&mut zeta, reach, h);
         // The particle fits of the solution, which the corrected gradients subtract.
-        fits(&zeta, &mut fit);
+        match on_nodes {
+            true => self.lay_on_nodes(&zeta, nodes, &mut fit),
+            false => {
+                self.on_nodes.clear();
+                fits(&zeta, &mut fit)
+            }
+        }
         self.keep(fit, frame, edge, zeta, supports);
         if let Some(multilevel) = multilevel {
             self.storage = multilevel.into_storage();
@@ -1409,6 +1457,37 @@ impl<const D: usize> VcCorrection<D> {
                 z.iter_mut().for_each(|x| *x *= bound / size);
             }
         });
+    }
+
+    /// Lays the order-1 coefficients `zeta` (per slot) on the grid's nodes for particle to
+    /// grid to fit (`mean_fit_coefficients`), and drops the particle fits.
+    fn lay_on_nodes(
+        &mut self,
+        zeta: &[f64],
+        nodes: &GridNodes<D>,
+        fit: &mut Vec<(Vector<D>, Matrix<D>)>,
+    ) {
+        fit.clear();
+        let on_nodes = &mut self.on_nodes;
+        on_nodes.resize(nodes.mass.len(), Vector::<D>::zeros());
+        let shared = SharedSlice::new(on_nodes);
+        nodes
+            .active
+            .par_iter()
+            .zip(zeta.par_chunks_exact(D))
+            .for_each(|(&n, z)| {
+                // SAFETY: every active node is listed once.
+                unsafe { shared.range(n, 1)[0] = Vector::<D>::from_fn(|k, _| z[k]) };
+            });
+    }
+
+    /// At order 1 with the mean fit on a tensor-product stencil: the coefficients `ζ` by grid
+    /// node (valid at the active nodes). Particle to grid takes each particle's correction
+    /// `(ζ_I − μ_p) |Ψ_Ip|`, `μ_p = Σ_I |Ψ_Ip| ζ_I / Σ_I |Ψ_Ip|`, from them and the stencil's
+    /// factors, as [`VcCorrection::gradient_correction_at`] does from the kept fits (the same
+    /// sums in the same order). `None` when the fits are kept instead.
+    pub fn mean_fit_coefficients(&self) -> Option<&[Vector<D>]> {
+        (!self.on_nodes.is_empty()).then_some(&self.on_nodes[..])
     }
 
     /// Keeps a step's particle fits, frames, edge nodes, coefficients and supports.
