@@ -33,7 +33,7 @@ impl<const D: usize> Gathered<D> {
 
 /// What one particle scatters to the nodes of its stencil (particle to grid).
 #[derive(Debug, Clone, Copy)]
-pub struct ScatterInput<const D: usize> {
+pub struct ScatterInput<'a, const D: usize> {
     pub position: Vector<D>,
     pub mass: f64,
     /// `m v`.
@@ -51,6 +51,11 @@ pub struct ScatterInput<const D: usize> {
     pub keep_body_force: bool,
     /// Add `m ∇Ψ` to `mass_gradient` (contact).
     pub with_gradient: bool,
+    /// With the force, VC's order-1 correction with the mean fit: its coefficients `ζ` by grid
+    /// node (valid at the stencil's nodes of nonzero `Ψ`). The force then adds
+    /// `−V σ (ζ_I − μ_p) Ψ_I`, `μ_p = Σ_I Ψ_I ζ_I / Σ_I Ψ_I` over the stencil
+    /// ([`crate::integration::VcCorrection::mean_fit_coefficients`]).
+    pub mean_fit: Option<&'a [Vector<D>]>,
 }
 
 /// The sums grid to particle takes over a particle's stencil.
@@ -139,7 +144,12 @@ pub trait StencilView<const D: usize>: Sync {
     /// # Safety
     /// As [`NodeScatter`]: no other thread writes the nodes of this stencil meanwhile.
     #[inline(always)]
-    unsafe fn scatter(&self, _p: usize, _input: &ScatterInput<D>, _out: &NodeScatter<D>) -> bool {
+    unsafe fn scatter(
+        &self,
+        _p: usize,
+        _input: &ScatterInput<'_, D>,
+        _out: &NodeScatter<D>,
+    ) -> bool {
         false
     }
 
@@ -895,7 +905,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
     >(
         &self,
         p: usize,
-        input: &ScatterInput<D>,
+        input: &ScatterInput<'_, D>,
         out: &NodeScatter<D>,
     ) {
         // SAFETY: the caller keeps the contract of `StencilView::scatter`: no other thread
@@ -917,6 +927,33 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
             let (vs, b) = input
                 .force
                 .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
+            // VC's mean fit: the particle's mean of the coefficients over its stencil, whose part
+            // `−V σ μ_p Ψ_I` rides on the row sums of the force (`Ψ = w_0 c`).
+            let mean_fit = input.mean_fit.filter(|_| FORCE);
+            let mut vs_mu = Vector::<D>::zeros();
+            if let Some(zeta) = mean_fit {
+                let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
+                let mut k = [0usize; D];
+                let mut row = base;
+                for _ in 0..W.pow(D as u32 - 1) {
+                    let mut c = 1.0;
+                    for a in 1..D {
+                        c *= w[a][k[a]];
+                    }
+                    for k0 in 0..W {
+                        let value = (w[0][k0] * c).abs();
+                        if value != 0.0 {
+                            weight += value;
+                            mu += value * zeta[row + k0];
+                        }
+                    }
+                    self.next_row(&mut k, &mut row);
+                }
+                if weight > 0.0 {
+                    mu /= weight;
+                }
+                vs_mu = vs * mu;
+            }
             // Axis-0 part of the affine momentum, per node of a row.
             let mut affine0 = [Vector::<D>::zeros(); W];
             if AFFINE {
@@ -953,6 +990,9 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                         force_rest += c_a[a] * vs.column(a);
                     }
                     force0 = c * vs.column(0);
+                    if mean_fit.is_some() {
+                        force_rest -= c * vs_mu;
+                    }
                 }
                 for k0 in 0..W {
                     let n = row + k0;
@@ -980,7 +1020,11 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                         }
                     }
                     if FORCE {
-                        scatter_add(out.force, n, dw[0][k0] * force0 + w[0][k0] * force_rest);
+                        let mut f = dw[0][k0] * force0 + w[0][k0] * force_rest;
+                        if let Some(zeta) = mean_fit {
+                            f += value * (vs * zeta[n]);
+                        }
+                        scatter_add(out.force, n, f);
                         if EXTRA && input.with_body_force {
                             let field = if input.keep_body_force {
                                 out.body_force
@@ -1062,7 +1106,7 @@ impl<const D: usize, const W: usize> StencilView<D> for TensorView<'_, D, W> {
     /// for the common cases: with or without APIC, with or without mass and force, and a
     /// general version when there is a body force or a mass gradient to add.
     #[inline(always)]
-    unsafe fn scatter(&self, p: usize, input: &ScatterInput<D>, out: &NodeScatter<D>) -> bool {
+    unsafe fn scatter(&self, p: usize, input: &ScatterInput<'_, D>, out: &NodeScatter<D>) -> bool {
         // SAFETY: the caller keeps `StencilView::scatter`'s contract (no other thread writes this
         // stencil's nodes); the AVX2 rows run only when `self.lanes` says the processor has it.
         unsafe {

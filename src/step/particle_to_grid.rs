@@ -13,7 +13,7 @@ use crate::grid::{Grid, GridNodes};
 use crate::integration::{BoundaryPoints, VcCorrection};
 use crate::options::Shape;
 use crate::particles::Particles;
-use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils, SupportNodes, TensorFactors};
+use crate::shape::{ScatterInput, StencilNode, StencilView, Stencils, SupportNodes};
 use crate::{Matrix, Vector};
 
 /// Phase 3: the particles' mass, momentum and force to the grid: to the one field, with VC's
@@ -270,18 +270,15 @@ where
                 with_body_force,
                 keep_body_force,
                 with_gradient,
+                mean_fit: vc.and_then(|vc| vc.mean_fit_coefficients()),
             };
             // SAFETY: as above.
             if unsafe { stencils.scatter(p, &input, &out) } {
                 if let (Some(vc), Some((vs, _)), Some(support)) = (vc, force, &support) {
                     // SAFETY: as above (the same stencil's nodes).
-                    unsafe {
-                        match (vc.mean_fit_coefficients(), &support.tensor) {
-                            (Some(zeta), Some(tensor)) => {
-                                scatter_mean_fit_correction(tensor, zeta, p, vs, &out)
-                            }
-                            _ => scatter_vc_correction(grid, vc, support, p, &xp, vs, &out),
-                        }
+                    // (with the mean fit on the factors the scatter took the correction).
+                    if vc.mean_fit_coefficients().is_none() {
+                        unsafe { scatter_vc_correction(grid, vc, support, p, &xp, vs, &out) };
                     }
                 }
                 return;
@@ -333,35 +330,5 @@ unsafe fn scatter_vc_correction<const D: usize>(
         let correction = vc.gradient_correction_at(grid, out.slot[n], n, p, xp, w);
         // SAFETY: the caller's.
         unsafe { scatter_add(out.force, n, vs * correction) };
-    });
-}
-
-/// [`scatter_vc_correction`] with the mean fit on a tensor-product stencil, from the
-/// coefficients by grid node ([`VcCorrection::mean_fit_coefficients`]): the particle's mean
-/// `μ_p = Σ_I |Ψ_Ip| ζ_I / Σ_I |Ψ_Ip|` over its stencil, then `f_I += −V_p σ_p (ζ_I − μ_p) |Ψ_Ip|`,
-/// the sums of the kept fits in their order, without a pass of their own.
-///
-/// # Safety
-/// As [`scatter_vc_correction`].
-#[inline(always)]
-unsafe fn scatter_mean_fit_correction<const D: usize>(
-    tensor: &TensorFactors<'_, D>,
-    zeta: &[Vector<D>],
-    p: usize,
-    vs: Matrix<D>,
-    out: &NodeScatter<D>,
-) {
-    let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
-    tensor.for_each_value(p, |n, w| {
-        let w = w.abs();
-        weight += w;
-        mu += w * zeta[n];
-    });
-    if weight > 0.0 {
-        mu /= weight;
-    }
-    tensor.for_each_value(p, |n, w| {
-        // SAFETY: the caller's.
-        unsafe { scatter_add(out.force, n, vs * ((zeta[n] - mu) * w.abs())) };
     });
 }
