@@ -48,11 +48,31 @@ fn tensor_rows<const D: usize>(
     nodes: &GridNodes<D>,
     volumes: &[f64],
     counted: &(impl Fn(usize) -> bool + Sync),
+    keys: (&[isize], &[usize], usize, usize),
+    out: (&mut [f64], &std::sync::atomic::AtomicBool),
+) {
+    // The width known to the compiler, which unrolls the loops over a stencil's nodes and
+    // factor pairs; the same sums in the same order.
+    match tensor.width {
+        2 => tensor_rows_of::<D, 2>(tensor, bins, nodes, volumes, counted, keys, out),
+        3 => tensor_rows_of::<D, 3>(tensor, bins, nodes, volumes, counted, keys, out),
+        4 => tensor_rows_of::<D, 4>(tensor, bins, nodes, volumes, counted, keys, out),
+        w => unreachable!("B-spline stencils of width {w}"),
+    }
+}
+
+/// [`tensor_rows`] with `W` nodes per axis.
+fn tensor_rows_of<const D: usize, const W: usize>(
+    tensor: &TensorFactors<'_, D>,
+    bins: &Bins<D>,
+    nodes: &GridNodes<D>,
+    volumes: &[f64],
+    counted: &(impl Fn(usize) -> bool + Sync),
     (box_key, box_step, centre, block): (&[isize], &[usize], usize, usize),
     (dense, boxes): (&mut [f64], &std::sync::atomic::AtomicBool),
 ) {
-    let w = tensor.width;
-    let len = box_key.len();
+    let (w, len) = (W, W.pow(D as u32));
+    debug_assert_eq!(len, box_key.len());
     let pairs = w * (w + 1) / 2;
     // The unordered pair of factors `(i, j)` of one axis.
     let pair = |i: usize, j: usize| {

@@ -274,10 +274,10 @@ where
             };
             // SAFETY: as above.
             if unsafe { stencils.scatter(p, &input, &out) } {
+                // VC's correction, unless the scatter took it (the mean fit on the factors).
                 if let (Some(vc), Some((vs, _)), Some(support)) = (vc, force, &support) {
-                    // SAFETY: as above (the same stencil's nodes).
-                    // (with the mean fit on the factors the scatter took the correction).
                     if vc.mean_fit_coefficients().is_none() {
+                        // SAFETY: as above (the same stencil's nodes).
                         unsafe { scatter_vc_correction(grid, vc, support, p, &xp, vs, &out) };
                     }
                 }
