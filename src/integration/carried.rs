@@ -156,9 +156,7 @@ impl CarriedCoefficients {
 
     /// The carried nodes (slot order of the solve) with their values.
     pub fn entries(&self) -> impl Iterator<Item = (usize, &[f64])> + '_ {
-        self.nodes
-            .iter()
-            .map(|&n| (n, &self.by_node[n * self.per..(n + 1) * self.per]))
+        listed(&self.nodes, &self.by_node, self.per)
     }
 
     /// Steps from the solve before to the last (zero when there is none).
@@ -168,10 +166,19 @@ impl CarriedCoefficients {
 
     /// The solve before the last: its nodes (slot order) with their values.
     pub fn entries_before(&self) -> impl Iterator<Item = (usize, &[f64])> + '_ {
-        self.before_nodes
-            .iter()
-            .map(|&n| (n, &self.before[n * self.per..(n + 1) * self.per]))
+        listed(&self.before_nodes, &self.before, self.per)
     }
+}
+
+/// The nodes (in their order) with their `per` values each from `by_node`.
+fn listed<'a>(
+    nodes: &'a [usize],
+    by_node: &'a [f64],
+    per: usize,
+) -> impl Iterator<Item = (usize, &'a [f64])> + 'a {
+    nodes
+        .iter()
+        .map(move |&n| (n, &by_node[n * per..(n + 1) * per]))
 }
 
 #[cfg(test)]

@@ -952,13 +952,8 @@ mod tests {
     #[test]
     fn the_carried_coefficients_are_kept_from_format_7() {
         let mut sim = block();
-        sim.set_integration(crate::Integration::Vc { order: 1 })
-            .unwrap();
-        let rule = crate::VcSolve {
-            interval: 3,
-            ..sim.vc_solve()
-        };
-        sim.set_vc_solve(rule).unwrap();
+        sim.set_vc1_every(3);
+        let rule = sim.vc_solve();
         let dt = sim.stable_dt(0.3).unwrap();
         // Solves at steps 1 and 4.
         for _ in 0..5 {

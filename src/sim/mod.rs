@@ -409,6 +409,19 @@ impl<const D: usize> Sim<D> {
         Ok(())
     }
 
+    /// VC of order 1 whose solve runs every `interval` steps, the rest of the rule in force
+    /// kept (the tests of the coefficients carried between solves).
+    #[cfg(test)]
+    pub(crate) fn set_vc1_every(&mut self, interval: u32) {
+        self.set_integration(crate::Integration::Vc { order: 1 })
+            .unwrap();
+        let solve = crate::VcSolve {
+            interval,
+            ..self.vc_solve()
+        };
+        self.set_vc_solve(solve).unwrap();
+    }
+
     /// Returns to the rule a simulation takes unless given one ([`crate::VcSolve::automatic`]).
     pub fn set_vc_solve_automatic(&mut self) {
         self.vc_solve = None;

@@ -436,14 +436,8 @@ fn rejected_steps_keep_the_last_good_state() {
 fn rejected_steps_keep_the_carried_surface_and_coefficients() {
     let vc_block = || {
         let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
-        sim.set_integration(crate::Integration::Vc { order: 1 })
-            .unwrap();
+        sim.set_vc1_every(3);
         sim.set_vc_surface_refresh(2).unwrap();
-        let solve = crate::VcSolve {
-            interval: 3,
-            ..sim.vc_solve()
-        };
-        sim.set_vc_solve(solve).unwrap();
         sim
     };
     let carried = |sim: &Sim<2>| sim.vc.as_ref().unwrap().carried().clone();
@@ -495,13 +489,7 @@ fn rejected_steps_keep_the_carried_surface_and_coefficients() {
 #[test]
 fn solves_from_carried_coefficients_cut_their_residual() {
     let mut sim = block::<2>(Shape::BSpline2, Transfer::Apic);
-    sim.set_integration(crate::Integration::Vc { order: 1 })
-        .unwrap();
-    let solve = crate::VcSolve {
-        interval: 2,
-        ..sim.vc_solve()
-    };
-    sim.set_vc_solve(solve).unwrap();
+    sim.set_vc1_every(2);
     let dt = sim.stable_dt(0.3).unwrap();
     let mut iterations = Vec::new();
     for _ in 0..12 {
