@@ -694,6 +694,9 @@ impl<const D: usize> VcCorrection<D> {
         if m == 1 {
             self.node_sums.resize(nodes.mass.len() * per, 0.0);
         }
+        // The step clears the grid before this pass: the nodes it lists first are the
+        // particles' (`reached`, below).
+        debug_assert!(nodes.active.is_empty());
         {
             let out = NodeScatter::new(nodes);
             let sums = SharedSlice::new(&mut self.node_sums);
@@ -1052,10 +1055,14 @@ impl<const D: usize> VcCorrection<D> {
         let on_nodes = m == 1 && !linear_fit && tensor.is_some();
         let mut fit = std::mem::take(&mut self.fit);
         fit.clear();
-        fit.resize(
-            positions.len(),
-            (Vector::<D>::zeros(), Matrix::<D>::zeros()),
-        );
+        // Room for the fits where they are taken: kept, or in the products of a matrix-free
+        // solve.
+        if !on_nodes || (!reuse && operator.is_none()) {
+            fit.resize(
+                positions.len(),
+                (Vector::<D>::zeros(), Matrix::<D>::zeros()),
+            );
+        }
         // The fits of ζ at the particles: the weighted mean `μ_p` of `ζ_J·Q_J(x_p)` and, at
         // order 1, the slope `C_p = Σ_J w_Jp ζ_J ⊗ u_Jp` of the weighted linear fit.
         let fits = |zeta: &[f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
@@ -1484,8 +1491,9 @@ impl<const D: usize> VcCorrection<D> {
     /// At order 1 with the mean fit on a tensor-product stencil: the coefficients `ζ` by grid
     /// node (valid at the active nodes). Particle to grid takes each particle's correction
     /// `(ζ_I − μ_p) |Ψ_Ip|`, `μ_p = Σ_I |Ψ_Ip| ζ_I / Σ_I |Ψ_Ip|`, from them and the stencil's
-    /// factors, as [`VcCorrection::gradient_correction_at`] does from the kept fits (the same
-    /// sums in the same order). `None` when the fits are kept instead.
+    /// factors in its factored scatter ([`crate::shape::ScatterInput`]`::mean_fit`), as
+    /// [`VcCorrection::gradient_correction_at`] does from kept fits (to round-off: the scatter
+    /// adds the part in `μ_p` to its rows' force sums). `None` when the fits are kept instead.
     pub fn mean_fit_coefficients(&self) -> Option<&[Vector<D>]> {
         (!self.on_nodes.is_empty()).then_some(&self.on_nodes[..])
     }
