@@ -1492,8 +1492,8 @@ impl<const D: usize> VcCorrection<D> {
     /// node (valid at the active nodes). Particle to grid takes each particle's correction
     /// `(ζ_I − μ_p) |Ψ_Ip|`, `μ_p = Σ_I |Ψ_Ip| ζ_I / Σ_I |Ψ_Ip|`, from them and the stencil's
     /// factors in its factored scatter ([`crate::shape::ScatterInput`]`::mean_fit`), as
-    /// [`VcCorrection::gradient_correction_at`] does from kept fits (to round-off: the scatter
-    /// adds the part in `μ_p` to its rows' force sums). `None` when the fits are kept instead.
+    /// [`VcCorrection::gradient_correction_at`] does from kept fits (the same sums in the same
+    /// order). `None` when the fits are kept instead.
     pub fn mean_fit_coefficients(&self) -> Option<&[Vector<D>]> {
         (!self.on_nodes.is_empty()).then_some(&self.on_nodes[..])
     }

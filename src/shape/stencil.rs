@@ -53,7 +53,8 @@ pub struct ScatterInput<'a, const D: usize> {
     pub with_gradient: bool,
     /// With the force, VC's order-1 correction with the mean fit: its coefficients `ζ` by grid
     /// node (valid at the stencil's nodes of nonzero `Ψ`). The force then adds
-    /// `−V σ (ζ_I − μ_p) Ψ_I`, `μ_p = Σ_I Ψ_I ζ_I / Σ_I Ψ_I` over the stencil
+    /// `−V σ (ζ_I − μ_p) |Ψ_I|`, `μ_p = Σ_I |Ψ_I| ζ_I / Σ_I |Ψ_I|` over the stencil, after the
+    /// rest of the node's force
     /// ([`crate::integration::VcCorrection::mean_fit_coefficients`]).
     pub mean_fit: Option<&'a [Vector<D>]>,
 }
@@ -927,32 +928,32 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
             let (vs, b) = input
                 .force
                 .unwrap_or_else(|| (Matrix::zeros(), Vector::zeros()));
-            // VC's mean fit: the particle's mean of the coefficients over its stencil, whose part
-            // `−V σ μ_p Ψ_I` rides on the row sums of the force (`Ψ = w_0 c`).
+            // VC's mean fit: the particle's mean of the coefficients over its stencil, with each
+            // node's `|Ψ|` as `tensor_product` takes it (ascending axes from one), the sums of
+            // the kept fits in their order.
             let mean_fit = input.mean_fit.filter(|_| FORCE);
-            let mut vs_mu = Vector::<D>::zeros();
+            let product = |k: &[usize; D]| {
+                let mut value = 1.0;
+                for a in 0..D {
+                    value *= w[a][k[a]];
+                }
+                value.abs()
+            };
+            let mut mu = Vector::<D>::zeros();
             if let Some(zeta) = mean_fit {
-                let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
-                let mut k = [0usize; D];
-                let mut row = base;
-                for _ in 0..W.pow(D as u32 - 1) {
-                    let mut c = 1.0;
-                    for a in 1..D {
-                        c *= w[a][k[a]];
+                let mut weight = 0.0;
+                let (mut k, mut node) = ([0usize; D], base);
+                for _ in 0..W.pow(D as u32) {
+                    let value = product(&k);
+                    if value != 0.0 {
+                        weight += value;
+                        mu += value * zeta[node];
                     }
-                    for k0 in 0..W {
-                        let value = (w[0][k0] * c).abs();
-                        if value != 0.0 {
-                            weight += value;
-                            mu += value * zeta[row + k0];
-                        }
-                    }
-                    self.next_row(&mut k, &mut row);
+                    next_in_box::<D, W>(&mut k, &mut node, &self.strides);
                 }
                 if weight > 0.0 {
                     mu /= weight;
                 }
-                vs_mu = vs * mu;
             }
             // Axis-0 part of the affine momentum, per node of a row.
             let mut affine0 = [Vector::<D>::zeros(); W];
@@ -990,9 +991,6 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                         force_rest += c_a[a] * vs.column(a);
                     }
                     force0 = c * vs.column(0);
-                    if mean_fit.is_some() {
-                        force_rest -= c * vs_mu;
-                    }
                 }
                 for k0 in 0..W {
                     let n = row + k0;
@@ -1020,10 +1018,7 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                         }
                     }
                     if FORCE {
-                        let mut f = dw[0][k0] * force0 + w[0][k0] * force_rest;
-                        if let Some(zeta) = mean_fit {
-                            f += value * (vs * zeta[n]);
-                        }
+                        let f = dw[0][k0] * force0 + w[0][k0] * force_rest;
                         scatter_add(out.force, n, f);
                         if EXTRA && input.with_body_force {
                             let field = if input.keep_body_force {
@@ -1032,6 +1027,13 @@ impl<const D: usize, const W: usize> TensorView<'_, D, W> {
                                 out.force
                             };
                             scatter_add(field, n, (m * value) * b);
+                        }
+                        // VC's correction last, as a pass of its own would add it (the same
+                        // bits: a chaotic collapse is not indifferent to the last bit).
+                        if let Some(zeta) = mean_fit {
+                            let mut kn = k;
+                            kn[0] = k0;
+                            scatter_add(out.force, n, vs * ((zeta[n] - mu) * product(&kn)));
                         }
                     }
                 }
