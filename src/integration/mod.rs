@@ -131,12 +131,12 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`; the solve runs every `interval` steps, and the steps between take the
 /// coefficients of the last solve, carried by grid node. At order 1 the next solve starts from
-/// them and stops once it has cut their residual tenfold and to 1e-2 of the right-hand side's
-/// (`VC_SOLVE_CARRIED_REDUCTION`), or at the tolerance: the coefficients track the particles.
+/// them and runs to the tolerance too: a solve stopped short of it (at a tenth of the carried
+/// coefficients' residual) let a fast collapse go chaotic and throw particles out of the grid.
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
 /// nodes whatever the coefficients are; the divergence equalities are met to the tolerance on
 /// the steps that solve. A simulation takes [`VcSolve::automatic`] unless given a rule: 1e-4
-/// at order 1, every fourth step with RK shape functions and every second with B-splines
+/// at order 1, every eighth step with RK shape functions and every second with B-splines
 /// (the study's errors within 0.6 % of a solve at every step), and at order ≥ 2 a tolerance of
 /// 1e-4 that falls as `h^3` on grids finer than 32 cells across, at every step (a quarter to a
 /// half of the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve
@@ -170,10 +170,11 @@ impl VcSolve {
     /// With RK shape functions at order 1 the automatic rule solves every this many steps; the
     /// steps between take the last solve's coefficients, carried by node and extrapolated
     /// along the line through the last two solves. The convergence study's errors stay within
-    /// 0.5 % of a solve at every step (quarter points and jittered particles, 2D and 3D, slip
-    /// and fixed + slip walls: docs/convergence/FINDINGS.md, "The VC solve's stopping rule");
-    /// linear and angular momentum are conserved whatever the coefficients.
-    pub const RK_INTERVAL: u32 = 4;
+    /// 0.4 % of a solve at every step (quarter points and jittered particles, 2D and 3D, slip
+    /// and fixed + slip walls: docs/convergence/FINDINGS.md, "The VC solve's stopping rule"),
+    /// and the fast granular collapse's heap within 0.3 %; linear and angular momentum are
+    /// conserved whatever the coefficients.
+    pub const RK_INTERVAL: u32 = 8;
 
     /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 3rd or 4th
     /// step moved the errors on quarter points with slip walls by 1–2 %, every 2nd by 0.6 % at
@@ -252,27 +253,6 @@ pub(crate) const VC_SOLVE_ATTAINABLE: f64 = 10.0;
 
 /// See [`VC_SOLVE_ATTAINABLE`].
 pub(crate) const VC_SOLVE_STAGNATION: usize = 10;
-
-/// With a solve every few steps (`VcSolve::interval` above one) a solve started from the carried
-/// coefficients stops once it has cut their residual (the preconditioned norm) to this fraction
-/// and to at most `VC_SOLVE_CARRIED_CEILING` of the right-hand side's, or at the tolerance: the
-/// coefficients track the particles from solve to solve, each solve removing nine tenths of what
-/// the particles' motion since the last left, instead of solving anew to 1e-4 of the right-hand
-/// side. With the V-cycle one iteration does it (2D B-spline 2 + VC1 every 2nd step, 1.02
-/// iterations a solve against 2.47 at 1e-4 on the manufactured solution's box at 64 cells); the
-/// convergence study's errors moved by at most 0.2 % (docs/convergence/FINDINGS.md, "The VC
-/// solve's stopping rule"). A fixed count of one or two iterations does not hold where the node
-/// blocks precondition (3D at 12 cells: L2 error −5 % with one, 22 times larger with two at
-/// every step).
-pub(crate) const VC_SOLVE_CARRIED_REDUCTION: f64 = 0.1;
-
-/// See [`VC_SOLVE_CARRIED_REDUCTION`]: where the particles' surface changed since the last solve
-/// the carried coefficients can be farther off than zero, and a tenth of their residual more than
-/// the right-hand side itself. Without this ceiling the default scene's RK + VC column had a
-/// pressure roughness of 0.050 at 0.5 s (0.0086 with a solve to 1e-4, 0.037 without VC); with
-/// it at 1e-2 0.0087, at 1 (never worse than from zero) 0.0100, at 1e-3 0.0087 but 2D `bspline2`
-/// + VC1 5 % slower than at 1e-2 (`runner/tests/pictures.rs`).
-pub(crate) const VC_SOLVE_CARRIED_CEILING: f64 = 1e-2;
 
 /// The largest correction any node takes at order 1, in units of `1/h` (the norm of its
 /// coefficients `ζ_I`, written in `(x − x_I)/h`). A node that the particles barely reach while
@@ -1295,8 +1275,6 @@ impl<const D: usize> VcCorrection<D> {
         let mut r = rhs.clone();
         let mut z = vec![0.0; len];
         let mut kd = vec![0.0; len];
-        // From carried coefficients, their residual cut by `VC_SOLVE_CARRIED_REDUCTION`.
-        let reduce = carry && carried;
         precondition(&r, &mut z);
         let rhs_rz = dot(&r, &z);
         let mut zeta = match carry && carried {
@@ -1338,10 +1316,6 @@ impl<const D: usize> VcCorrection<D> {
         let mut current = size(&r, rz);
         let rhs_size = size(&rhs, rhs_rz);
         let mut target = tolerance * tolerance * rhs_size;
-        if reduce {
-            let (cut, ceiling) = (VC_SOLVE_CARRIED_REDUCTION, VC_SOLVE_CARRIED_CEILING);
-            target = target.max((cut * cut * current).min(ceiling * ceiling * rhs_size));
-        }
         let (mut best, mut best_rz) = (zeta.clone(), current);
         let (mut iterations, mut restarts) = (0, 0);
         // At order ≥ 2, whether the best iterate is as good as round-off allows and the last
