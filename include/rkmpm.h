@@ -60,7 +60,7 @@
  * Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
  * the steps between taking the last solve's coefficients.
  */
-#define RKMPM_RK_VC_SOLVE_INTERVAL 8
+#define RKMPM_RK_VC_SOLVE_INTERVAL 4
 
 /**
  * As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
@@ -921,7 +921,7 @@ enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
  * Between solves the coefficients go on along the line through the last two solves. Without
  * it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
  * every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
- * `RKMPM_RK_VC_SOLVE_INTERVAL` (8) with RK shape functions, the convergence study's errors
+ * `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions, the convergence study's errors
  * within 0.6 % of a solve at every step (docs/convergence/FINDINGS.md). Linear and
  * angular momentum are conserved whatever the interval. Keeps the tolerance and the
  * iteration bound in force (`rkmpm_sim_set_vc_solve`). May change between steps; part of a

@@ -378,7 +378,7 @@ fn rk1_is_the_cubic_bspline<const D: usize>(integration: rkmpm::options::Integra
         sim.set_shape(shape).unwrap();
         sim.set_integration(integration).unwrap();
         // One rule for both: the automatic one solves every few steps with RK shape functions
-        // and at every step with B-splines (a solve every eighth step here).
+        // and at every step with B-splines (a solve every fourth step here).
         let solve = rkmpm::VcSolve {
             interval: rkmpm::VcSolve::RK_INTERVAL,
             ..sim.vc_solve()

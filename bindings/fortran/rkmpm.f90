@@ -53,7 +53,7 @@ module rkmpm
    ! RKMPM_RK_VC_SOLVE_INTERVAL with RK shape functions, the steps between taking the last
    ! solve's coefficients.
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_INTERVAL = 1
-   integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 8
+   integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 4
    integer(c_int32_t), parameter, public :: RKMPM_BSPLINE_VC_SOLVE_INTERVAL = 2
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
@@ -1427,7 +1427,7 @@ contains
    end subroutine sim_vc_solve
 
    !> Every how many steps VC's solve runs (default every step, at order 1
-   !> RKMPM_BSPLINE_VC_SOLVE_INTERVAL, 2, with B-splines and RKMPM_RK_VC_SOLVE_INTERVAL, 8, with
+   !> RKMPM_BSPLINE_VC_SOLVE_INTERVAL, 2, with B-splines and RKMPM_RK_VC_SOLVE_INTERVAL, 4, with
    !> RK shape functions; order >= 2 and contact solve at every step): the steps between take
    !> the last solve's coefficients, carried by grid node along the line through the last two
    !> solves. Momentum is conserved

@@ -136,7 +136,7 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
 /// nodes whatever the coefficients are; the divergence equalities are met to the tolerance on
 /// the steps that solve. A simulation takes [`VcSolve::automatic`] unless given a rule: 1e-4
-/// at order 1, every eighth step with RK shape functions and every second with B-splines
+/// at order 1, every fourth step with RK shape functions and every second with B-splines
 /// (the study's errors within 0.6 % of a solve at every step), and at order ≥ 2 a tolerance of
 /// 1e-4 that falls as `h^3` on grids finer than 32 cells across, at every step (a quarter to a
 /// half of the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve
@@ -170,15 +170,16 @@ impl VcSolve {
     /// With RK shape functions at order 1 the automatic rule solves every this many steps; the
     /// steps between take the last solve's coefficients, carried by node and extrapolated
     /// along the line through the last two solves. The convergence study's errors stay within
-    /// 0.4 % of a solve at every step (quarter points and jittered particles, 2D and 3D, slip
-    /// and fixed + slip walls: docs/convergence/FINDINGS.md, "The VC solve's stopping rule"),
-    /// and the fast granular collapse's heap within 0.3 %; linear and angular momentum are
-    /// conserved whatever the coefficients.
-    pub const RK_INTERVAL: u32 = 8;
+    /// 0.8 % of a solve at every step (quarter points and jittered particles, 2D to 128 cells
+    /// and 3D, slip and fixed + slip walls: docs/convergence/FINDINGS.md, "The VC solve's
+    /// stopping rule"; every eighth step moved jittered particles' L2 error at 128 cells by
+    /// 2.4–3.6 %), and the fast granular collapse's heap within 0.6 %; linear and angular
+    /// momentum are conserved whatever the coefficients.
+    pub const RK_INTERVAL: u32 = 4;
 
     /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 3rd or 4th
     /// step moved the errors on quarter points with slip walls by 1–2 %, every 2nd by 0.6 % at
-    /// most).
+    /// most to 64 cells, but by 2.7 % at 128).
     pub const BSPLINE_INTERVAL: u32 = 2;
 
     /// The exact solve: 1e-12 of the right-hand side's residual (`VC_SOLVE_EXACT_TOLERANCE`),

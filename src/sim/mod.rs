@@ -396,7 +396,7 @@ impl<const D: usize> Sim<D> {
     /// The rule of VC's conservative solve (kept by checkpoints, with the coefficients carried
     /// between solves). Unless given one, a simulation takes [`crate::VcSolve::automatic`] for
     /// its VC order, grid and shape functions: at order 1 a residual of 1e-4 of the right-hand
-    /// side's, solved every eighth step with RK shape functions, every second with the
+    /// side's, solved every fourth step with RK shape functions, every second with the
     /// B-splines and at every step with linear hats; at order ≥ 2 1e-4 on grids of up to 32 cells across, falling as `(32 / N)^3` on
     /// wider ones, at every step. Linear and angular momentum are conserved whatever the rule; a
     /// looser rule meets the divergence equalities less exactly and costs less
