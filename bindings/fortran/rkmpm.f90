@@ -51,10 +51,13 @@ module rkmpm
    ! Every how many steps VC's solve runs in a new simulation (sim%set_vc_solve_interval changes
    ! it): every step, but at order 1 RKMPM_BSPLINE_VC_SOLVE_INTERVAL steps with B-splines and
    ! RKMPM_RK_VC_SOLVE_INTERVAL with RK shape functions, the steps between taking the last
-   ! solve's coefficients.
+   ! solve's coefficients, on grids up to RKMPM_BSPLINE_VC_CARRIED_CELLS and
+   ! RKMPM_RK_VC_CARRIED_CELLS cells along the widest axis, halved with every doubling beyond.
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_INTERVAL = 1
    integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 4
    integer(c_int32_t), parameter, public :: RKMPM_BSPLINE_VC_SOLVE_INTERVAL = 2
+   integer(c_int64_t), parameter, public :: RKMPM_RK_VC_CARRIED_CELLS = 128
+   integer(c_int64_t), parameter, public :: RKMPM_BSPLINE_VC_CARRIED_CELLS = 64
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4
@@ -1428,7 +1431,9 @@ contains
 
    !> Every how many steps VC's solve runs (default every step, at order 1
    !> RKMPM_BSPLINE_VC_SOLVE_INTERVAL, 2, with B-splines and RKMPM_RK_VC_SOLVE_INTERVAL, 4, with
-   !> RK shape functions; order >= 2 and contact solve at every step): the steps between take
+   !> RK shape functions to RKMPM_BSPLINE_VC_CARRIED_CELLS and RKMPM_RK_VC_CARRIED_CELLS cells
+   !> across, halved with every doubling beyond; order >= 2 and contact solve at every step):
+   !> the steps between take
    !> the last solve's coefficients, carried by grid node along the line through the last two
    !> solves. Momentum is conserved
    !> whatever the interval.

@@ -45,7 +45,9 @@ pub const RKMPM_DEFAULT_VC_SURFACE_REFRESH: u32 = 4;
 const _: () = assert!(RKMPM_DEFAULT_VC_SURFACE_REFRESH == rkmpm::DEFAULT_VC_SURFACE_REFRESH);
 /// Every how many steps VC's solve runs in a new simulation (`rkmpm_sim_set_vc_solve_interval`):
 /// at every step, but at order 1 `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` with B-splines and
-/// `RKMPM_RK_VC_SOLVE_INTERVAL` with RK shape functions.
+/// `RKMPM_RK_VC_SOLVE_INTERVAL` with RK shape functions on grids up to
+/// `RKMPM_BSPLINE_VC_CARRIED_CELLS` and `RKMPM_RK_VC_CARRIED_CELLS` cells along the widest axis,
+/// halved with every doubling of the grid beyond.
 pub const RKMPM_DEFAULT_VC_SOLVE_INTERVAL: u32 = 1;
 const _: () = assert!(RKMPM_DEFAULT_VC_SOLVE_INTERVAL == rkmpm::VcSolve::DEFAULT.interval);
 /// Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
@@ -55,6 +57,14 @@ const _: () = assert!(RKMPM_RK_VC_SOLVE_INTERVAL == rkmpm::VcSolve::RK_INTERVAL)
 /// As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
 pub const RKMPM_BSPLINE_VC_SOLVE_INTERVAL: u32 = 2;
 const _: () = assert!(RKMPM_BSPLINE_VC_SOLVE_INTERVAL == rkmpm::VcSolve::BSPLINE_INTERVAL);
+/// The widest grid (cells along its widest axis) on which a new simulation with RK shape
+/// functions solves VC of order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` steps.
+pub const RKMPM_RK_VC_CARRIED_CELLS: u64 = 128;
+const _: () = assert!(RKMPM_RK_VC_CARRIED_CELLS as usize == rkmpm::VcSolve::RK_CARRIED_CELLS);
+/// As `RKMPM_RK_VC_CARRIED_CELLS`, with the quadratic and cubic B-splines.
+pub const RKMPM_BSPLINE_VC_CARRIED_CELLS: u64 = 64;
+const _: () =
+    assert!(RKMPM_BSPLINE_VC_CARRIED_CELLS as usize == rkmpm::VcSolve::BSPLINE_CARRIED_CELLS);
 /// The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
 pub const RKMPM_DEFAULT_VC_SOLVE_MAX_ITERATIONS: u64 = 2000;
 const _: () = assert!(
@@ -1291,8 +1301,10 @@ pub unsafe extern "C" fn rkmpm_sim_set_vc_solve(
 /// Between solves the coefficients go on along the line through the last two solves. Without
 /// it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
 /// every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
-/// `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions, the convergence study's errors
-/// within 0.6 % of a solve at every step (docs/convergence/FINDINGS.md). Linear and
+/// `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions on grids up to
+/// `RKMPM_BSPLINE_VC_CARRIED_CELLS` (64) and `RKMPM_RK_VC_CARRIED_CELLS` (128) cells across,
+/// halved with every doubling of the grid beyond, the convergence study's errors within 1 % of
+/// a solve at every step (docs/convergence/FINDINGS.md). Linear and
 /// angular momentum are conserved whatever the interval. Keeps the tolerance and the
 /// iteration bound in force (`rkmpm_sim_set_vc_solve`). May change between steps; part of a
 /// checkpoint, with the carried coefficients. A refused value changes nothing.

@@ -136,8 +136,9 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
 /// nodes whatever the coefficients are; the divergence equalities are met to the tolerance on
 /// the steps that solve. A simulation takes [`VcSolve::automatic`] unless given a rule: 1e-4
-/// at order 1, every fourth step with RK shape functions and every second with B-splines
-/// (the study's errors within 0.6 % of a solve at every step), and at order ≥ 2 a tolerance of
+/// at order 1, every fourth step with RK shape functions to 128 cells across and every second
+/// with B-splines to 64, halved with every doubling of the grid beyond (the study's errors
+/// within 1 % of a solve at every step, [`VcSolve::interval_for`]), and at order ≥ 2 a tolerance of
 /// 1e-4 that falls as `h^3` on grids finer than 32 cells across, at every step (a quarter to a
 /// half of the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve
 /// at every step for tests that check the equalities or mirror symmetry to round-off.
@@ -167,20 +168,30 @@ impl VcSolve {
         interval: 1,
     };
 
-    /// With RK shape functions at order 1 the automatic rule solves every this many steps; the
-    /// steps between take the last solve's coefficients, carried by node and extrapolated
-    /// along the line through the last two solves. The convergence study's errors stay within
-    /// 0.8 % of a solve at every step (quarter points and jittered particles, 2D to 128 cells
-    /// and 3D, slip and fixed + slip walls: docs/convergence/FINDINGS.md, "The VC solve's
-    /// stopping rule"; every eighth step moved jittered particles' L2 error at 128 cells by
-    /// 2.4–3.6 %), and the fast granular collapse's heap within 0.6 %; linear and angular
-    /// momentum are conserved whatever the coefficients.
+    /// With RK shape functions at order 1 the automatic rule solves every this many steps on
+    /// grids up to [`VcSolve::RK_CARRIED_CELLS`] cells across (halving with every doubling of the
+    /// grid beyond, [`VcSolve::interval_for`]); the steps between take the last solve's
+    /// coefficients, carried by node and extrapolated along the line through the last two
+    /// solves. The convergence study's errors stay within 0.8 % of a solve at every step
+    /// (quarter points and jittered particles, 2D to 128 cells and 3D, slip and fixed + slip
+    /// walls: docs/convergence/FINDINGS.md, "The VC solve's stopping rule"; every eighth step
+    /// moved jittered particles' L2 error at 128 cells by 2.4–3.6 %), and the fast granular
+    /// collapse's heap within 0.6 %; linear and angular momentum are conserved whatever the
+    /// coefficients.
     pub const RK_INTERVAL: u32 = 4;
+
+    /// The widest grid (cells across) on which RK's automatic interval is
+    /// [`VcSolve::RK_INTERVAL`].
+    pub const RK_CARRIED_CELLS: usize = 128;
 
     /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 3rd or 4th
     /// step moved the errors on quarter points with slip walls by 1–2 %, every 2nd by 0.6 % at
-    /// most to 64 cells, but by 2.7 % at 128).
+    /// most to 64 cells, but by 1.0 % at 96 and 2.7 % at 128).
     pub const BSPLINE_INTERVAL: u32 = 2;
+
+    /// The widest grid (cells across) on which the B-splines' automatic interval is
+    /// [`VcSolve::BSPLINE_INTERVAL`].
+    pub const BSPLINE_CARRIED_CELLS: usize = 64;
 
     /// The exact solve: 1e-12 of the right-hand side's residual (`VC_SOLVE_EXACT_TOLERANCE`),
     /// at most 2000 iterations, at every step.
@@ -200,11 +211,7 @@ impl VcSolve {
     pub fn automatic(order: u32, cells_across: usize, shape: ShapeKind) -> VcSolve {
         if order < 2 {
             return VcSolve {
-                interval: match shape {
-                    ShapeKind::Rk => VcSolve::RK_INTERVAL,
-                    ShapeKind::Bspline2 | ShapeKind::Bspline3 => VcSolve::BSPLINE_INTERVAL,
-                    ShapeKind::Linear => 1,
-                },
+                interval: VcSolve::interval_for(shape, cells_across),
                 ..VcSolve::DEFAULT
             };
         }
@@ -215,6 +222,32 @@ impl VcSolve {
             max_iterations: VC_SOLVE_MAX_ITERATIONS,
             interval: 1,
         }
+    }
+
+    /// The automatic rule's interval at order 1 on a grid of `cells_across` cells along its
+    /// widest axis: with RK shape functions [`VcSolve::RK_INTERVAL`] up to
+    /// [`VcSolve::RK_CARRIED_CELLS`], with B-splines [`VcSolve::BSPLINE_INTERVAL`] up to
+    /// [`VcSolve::BSPLINE_CARRIED_CELLS`], halved with every doubling of the grid beyond (at
+    /// least 1); with linear hats 1. What the carried coefficients move grows with the grid's
+    /// width while the error they move falls: on the manufactured solution a fixed interval `k`
+    /// moved the error by about `k^2 N^2.4` on `N` cells (B-spline 2 + VC1 every 2nd step,
+    /// quarter points: 0.04, 0.5, 1.0 and 2.7 % at 32, 64, 96 and 128 cells; RK1 + VC1 on
+    /// jittered particles at 128 cells 0.5–0.8 % every 4th step, 2.4–3.6 % every 8th), so no
+    /// fixed interval holds the errors within 1 % of a solve at every step on every grid
+    /// (docs/convergence/FINDINGS.md, "Carried coefficients on fine grids").
+    pub fn interval_for(shape: ShapeKind, cells_across: usize) -> u32 {
+        let (mut interval, mut widest) = match shape {
+            ShapeKind::Rk => (VcSolve::RK_INTERVAL, VcSolve::RK_CARRIED_CELLS),
+            ShapeKind::Bspline2 | ShapeKind::Bspline3 => {
+                (VcSolve::BSPLINE_INTERVAL, VcSolve::BSPLINE_CARRIED_CELLS)
+            }
+            ShapeKind::Linear => return 1,
+        };
+        while cells_across > widest && interval > 1 {
+            interval /= 2;
+            widest *= 2;
+        }
+        interval
     }
 
     /// Refuses a tolerance outside `(0, 1]` (or not finite), zero iterations and an interval of

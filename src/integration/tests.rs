@@ -633,28 +633,43 @@ fn bodies_are_the_components_on_any_number_of_threads() {
 }
 
 /// The automatic rule: 1e-4 at order 1, solving every `RK_INTERVAL` steps with RK shape
-/// functions, every `BSPLINE_INTERVAL` with B-splines and at every step with linear hats; at
-/// order ≥ 2 1e-4 to 32 cells across, then `1e-4 (32 / N)^3`, never below the exact solve's
-/// tolerance, at every step.
+/// functions to `RK_CARRIED_CELLS` cells across, every `BSPLINE_INTERVAL` with B-splines to
+/// `BSPLINE_CARRIED_CELLS`, halved with every doubling of the grid beyond, and at every step
+/// with linear hats; at order ≥ 2 1e-4 to 32 cells across, then `1e-4 (32 / N)^3`, never below
+/// the exact solve's tolerance, at every step.
 #[test]
 fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
     use crate::options::ShapeKind;
-    for cells in [1, 32, 64, 100_000] {
+    // Cells across, and the intervals with RK shape functions and with B-splines.
+    for (cells, rk, bspline) in [
+        (1, 4, 2),
+        (32, 4, 2),
+        (64, 4, 2),
+        (65, 4, 1),
+        (128, 4, 1),
+        (129, 2, 1),
+        (204, 2, 1),
+        (256, 2, 1),
+        (257, 1, 1),
+        (100_000, 1, 1),
+    ] {
         assert_eq!(
             VcSolve::automatic(1, cells, ShapeKind::Linear),
             VcSolve::DEFAULT
         );
         for shape in [ShapeKind::Bspline2, ShapeKind::Bspline3] {
-            let bspline = VcSolve::automatic(1, cells, shape);
-            assert_eq!(
-                (bspline.tolerance, bspline.interval),
-                (1e-4, VcSolve::BSPLINE_INTERVAL)
-            );
+            let rule = VcSolve::automatic(1, cells, shape);
+            assert_eq!((rule.tolerance, rule.interval), (1e-4, bspline), "{cells}");
         }
-        let rk = VcSolve::automatic(1, cells, ShapeKind::Rk);
-        assert_eq!((rk.tolerance, rk.interval), (1e-4, VcSolve::RK_INTERVAL));
+        let rule = VcSolve::automatic(1, cells, ShapeKind::Rk);
+        assert_eq!((rule.tolerance, rule.interval), (1e-4, rk), "{cells}");
         assert_eq!(VcSolve::automatic(2, cells, ShapeKind::Rk).interval, 1);
     }
+    assert_eq!(
+        (VcSolve::RK_INTERVAL, VcSolve::BSPLINE_INTERVAL),
+        (4, 2),
+        "the table above"
+    );
     let tolerance = |order, cells| VcSolve::automatic(order, cells, ShapeKind::Rk).tolerance;
     assert_eq!(tolerance(2, 0), 1e-4);
     assert_eq!(tolerance(2, 16), 1e-4);
