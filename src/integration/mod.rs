@@ -169,15 +169,11 @@ impl VcSolve {
     };
 
     /// With RK shape functions at order 1 the automatic rule solves every this many steps on
-    /// grids up to [`VcSolve::RK_CARRIED_CELLS`] cells across (halving with every doubling of the
-    /// grid beyond, [`VcSolve::interval_for`]); the steps between take the last solve's
-    /// coefficients, carried by node and extrapolated along the line through the last two
-    /// solves. The convergence study's errors stay within 0.8 % of a solve at every step
-    /// (quarter points and jittered particles, 2D to 128 cells and 3D, slip and fixed + slip
-    /// walls: docs/convergence/FINDINGS.md, "The VC solve's stopping rule"; every eighth step
-    /// moved jittered particles' L2 error at 128 cells by 2.4–3.6 %), and the fast granular
-    /// collapse's heap within 0.6 %; linear and angular momentum are conserved whatever the
-    /// coefficients.
+    /// grids up to [`VcSolve::RK_CARRIED_CELLS`] cells across ([`VcSolve::interval_for`], which
+    /// gives the errors measured); the steps between take the last solve's coefficients,
+    /// carried by node and extrapolated along the line through the last two solves. The fast
+    /// granular collapse's heap stays within 0.6 % of a solve at every step; linear and angular
+    /// momentum are conserved whatever the coefficients.
     pub const RK_INTERVAL: u32 = 4;
 
     /// The widest grid (cells across) on which RK's automatic interval is
@@ -185,8 +181,7 @@ impl VcSolve {
     pub const RK_CARRIED_CELLS: usize = 128;
 
     /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 3rd or 4th
-    /// step moved the errors on quarter points with slip walls by 1–2 %, every 2nd by 0.6 % at
-    /// most to 64 cells, but by 1.0 % at 96 and 2.7 % at 128).
+    /// step moved the errors on quarter points with slip walls by 1–2 % at 32 and 64 cells).
     pub const BSPLINE_INTERVAL: u32 = 2;
 
     /// The widest grid (cells across) on which the B-splines' automatic interval is
@@ -232,9 +227,10 @@ impl VcSolve {
     /// width while the error they move falls: on the manufactured solution a fixed interval `k`
     /// moved the error by about `k^2 N^2.4` on `N` cells (B-spline 2 + VC1 every 2nd step,
     /// quarter points: 0.04, 0.5, 1.0 and 2.7 % at 32, 64, 96 and 128 cells; RK1 + VC1 on
-    /// jittered particles at 128 cells 0.5–0.8 % every 4th step, 2.4–3.6 % every 8th), so no
-    /// fixed interval holds the errors within 1 % of a solve at every step on every grid
-    /// (docs/convergence/FINDINGS.md, "Carried coefficients on fine grids").
+    /// jittered particles at 128 cells 0.5–0.8 % every 4th step, 2.4–3.6 % every 8th, at 256
+    /// cells 0.3–0.5 % every 2nd, 3.0 % every 4th), so no fixed interval holds the errors
+    /// within 1 % of a solve at every step on every grid (docs/convergence/FINDINGS.md,
+    /// "Carried coefficients on fine grids").
     pub fn interval_for(shape: ShapeKind, cells_across: usize) -> u32 {
         let (mut interval, mut widest) = match shape {
             ShapeKind::Rk => (VcSolve::RK_INTERVAL, VcSolve::RK_CARRIED_CELLS),

@@ -396,10 +396,11 @@ impl<const D: usize> Sim<D> {
     /// The rule of VC's conservative solve (kept by checkpoints, with the coefficients carried
     /// between solves). Unless given one, a simulation takes [`crate::VcSolve::automatic`] for
     /// its VC order, grid and shape functions: at order 1 a residual of 1e-4 of the right-hand
-    /// side's, solved every fourth step with RK shape functions, every second with the
-    /// B-splines and at every step with linear hats; at order ≥ 2 1e-4 on grids of up to 32
-    /// cells across, falling as `(32 / N)^3` on wider ones, at every step. Linear and angular momentum are conserved whatever the rule; a
-    /// looser rule meets the divergence equalities less exactly and costs less
+    /// side's, solved every fourth step with RK shape functions to 128 cells across, every
+    /// second with the B-splines to 64, halved with every doubling of the grid beyond
+    /// ([`crate::VcSolve::interval_for`]), and at every step with linear hats; at order ≥ 2 1e-4
+    /// on grids of up to 32 cells across, falling as `(32 / N)^3` on wider ones, at every step.
+    /// Linear and angular momentum are conserved whatever the rule; a looser rule meets the divergence equalities less exactly and costs less
     /// (docs/convergence/FINDINGS.md, "The VC solve's stopping rule"). Refuses a tolerance
     /// outside `(0, 1]`, zero iterations and an interval of zero steps.
     pub fn set_vc_solve(&mut self, solve: crate::VcSolve) -> Result<()> {
