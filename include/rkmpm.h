@@ -62,7 +62,7 @@
  * Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
  * the steps between taking the last solve's coefficients.
  */
-#define RKMPM_RK_VC_SOLVE_INTERVAL 4
+#define RKMPM_RK_VC_SOLVE_INTERVAL 8
 
 /**
  * As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
@@ -73,12 +73,12 @@
  * The widest grid (cells along its widest axis) on which a new simulation with RK shape
  * functions solves VC of order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` steps.
  */
-#define RKMPM_RK_VC_CARRIED_CELLS 128
+#define RKMPM_RK_VC_CARRIED_CELLS 256
 
 /**
  * As `RKMPM_RK_VC_CARRIED_CELLS`, with the quadratic and cubic B-splines.
  */
-#define RKMPM_BSPLINE_VC_CARRIED_CELLS 64
+#define RKMPM_BSPLINE_VC_CARRIED_CELLS 256
 
 /**
  * The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
@@ -931,11 +931,12 @@ enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
  * `steps` >= 1 steps, the steps between taking the last solve's coefficients, carried by grid
  * node (the next solve starts from them); 1 solves at every step. Order 1 only, without
  * contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
- * Between solves the coefficients go on along the line through the last two solves. Without
+ * Between solves the coefficients go on along the line through the last two solves and, on
+ * grids wider than 64 cells across, take two sweeps on the step's own system. Without
  * it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
  * every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
- * `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions on grids up to
- * `RKMPM_BSPLINE_VC_CARRIED_CELLS` (64) and `RKMPM_RK_VC_CARRIED_CELLS` (128) cells across,
+ * `RKMPM_RK_VC_SOLVE_INTERVAL` (8) with RK shape functions on grids up to
+ * `RKMPM_BSPLINE_VC_CARRIED_CELLS` (256) and `RKMPM_RK_VC_CARRIED_CELLS` (256) cells across,
  * halved with every doubling of the grid beyond, the convergence study's errors within 1 % of
  * a solve at every step (docs/convergence/FINDINGS.md). Linear and
  * angular momentum are conserved whatever the interval. Keeps the tolerance and the

@@ -54,10 +54,10 @@ module rkmpm
    ! solve's coefficients, on grids up to RKMPM_BSPLINE_VC_CARRIED_CELLS and
    ! RKMPM_RK_VC_CARRIED_CELLS cells along the widest axis, halved with every doubling beyond.
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SOLVE_INTERVAL = 1
-   integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 4
+   integer(c_int32_t), parameter, public :: RKMPM_RK_VC_SOLVE_INTERVAL = 8
    integer(c_int32_t), parameter, public :: RKMPM_BSPLINE_VC_SOLVE_INTERVAL = 2
-   integer(c_int64_t), parameter, public :: RKMPM_RK_VC_CARRIED_CELLS = 128
-   integer(c_int64_t), parameter, public :: RKMPM_BSPLINE_VC_CARRIED_CELLS = 64
+   integer(c_int64_t), parameter, public :: RKMPM_RK_VC_CARRIED_CELLS = 256
+   integer(c_int64_t), parameter, public :: RKMPM_BSPLINE_VC_CARRIED_CELLS = 256
    ! Every how many steps VC finds the surface of the particles anew in a new simulation
    ! (sim%set_vc_surface_refresh changes it).
    integer(c_int32_t), parameter, public :: RKMPM_DEFAULT_VC_SURFACE_REFRESH = 4

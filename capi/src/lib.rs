@@ -52,17 +52,17 @@ pub const RKMPM_DEFAULT_VC_SOLVE_INTERVAL: u32 = 1;
 const _: () = assert!(RKMPM_DEFAULT_VC_SOLVE_INTERVAL == rkmpm::VcSolve::DEFAULT.interval);
 /// Every how many steps VC's solve of order 1 runs in a new simulation with RK shape functions,
 /// the steps between taking the last solve's coefficients.
-pub const RKMPM_RK_VC_SOLVE_INTERVAL: u32 = 4;
+pub const RKMPM_RK_VC_SOLVE_INTERVAL: u32 = 8;
 const _: () = assert!(RKMPM_RK_VC_SOLVE_INTERVAL == rkmpm::VcSolve::RK_INTERVAL);
 /// As `RKMPM_RK_VC_SOLVE_INTERVAL`, with the quadratic and cubic B-splines.
 pub const RKMPM_BSPLINE_VC_SOLVE_INTERVAL: u32 = 2;
 const _: () = assert!(RKMPM_BSPLINE_VC_SOLVE_INTERVAL == rkmpm::VcSolve::BSPLINE_INTERVAL);
 /// The widest grid (cells along its widest axis) on which a new simulation with RK shape
 /// functions solves VC of order 1 every `RKMPM_RK_VC_SOLVE_INTERVAL` steps.
-pub const RKMPM_RK_VC_CARRIED_CELLS: u64 = 128;
+pub const RKMPM_RK_VC_CARRIED_CELLS: u64 = 256;
 const _: () = assert!(RKMPM_RK_VC_CARRIED_CELLS as usize == rkmpm::VcSolve::RK_CARRIED_CELLS);
 /// As `RKMPM_RK_VC_CARRIED_CELLS`, with the quadratic and cubic B-splines.
-pub const RKMPM_BSPLINE_VC_CARRIED_CELLS: u64 = 64;
+pub const RKMPM_BSPLINE_VC_CARRIED_CELLS: u64 = 256;
 const _: () =
     assert!(RKMPM_BSPLINE_VC_CARRIED_CELLS as usize == rkmpm::VcSolve::BSPLINE_CARRIED_CELLS);
 /// The iteration bound of VC's solve in a new simulation (`rkmpm_sim_set_vc_solve`).
@@ -1298,11 +1298,12 @@ pub unsafe extern "C" fn rkmpm_sim_set_vc_solve(
 /// `steps` >= 1 steps, the steps between taking the last solve's coefficients, carried by grid
 /// node (the next solve starts from them); 1 solves at every step. Order 1 only, without
 /// contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
-/// Between solves the coefficients go on along the line through the last two solves. Without
+/// Between solves the coefficients go on along the line through the last two solves and, on
+/// grids wider than 64 cells across, take two sweeps on the step's own system. Without
 /// it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
 /// every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
-/// `RKMPM_RK_VC_SOLVE_INTERVAL` (4) with RK shape functions on grids up to
-/// `RKMPM_BSPLINE_VC_CARRIED_CELLS` (64) and `RKMPM_RK_VC_CARRIED_CELLS` (128) cells across,
+/// `RKMPM_RK_VC_SOLVE_INTERVAL` (8) with RK shape functions on grids up to
+/// `RKMPM_BSPLINE_VC_CARRIED_CELLS` (256) and `RKMPM_RK_VC_CARRIED_CELLS` (256) cells across,
 /// halved with every doubling of the grid beyond, the convergence study's errors within 1 % of
 /// a solve at every step (docs/convergence/FINDINGS.md). Linear and
 /// angular momentum are conserved whatever the interval. Keeps the tolerance and the

@@ -130,14 +130,15 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// The rule of VC's conservative solve: conjugate gradients stop when the preconditioned
 /// residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`; the solve runs every `interval` steps, and the steps between take the
-/// coefficients of the last solve, carried by grid node. At order 1 the next solve starts from
+/// coefficients of the last solve, carried by grid node, after two sweeps of the node blocks
+/// on their own system (`VC_CARRIED_SWEEPS`). At order 1 the next solve starts from
 /// them and runs to the tolerance too: a solve stopped short of it (at a tenth of the carried
 /// coefficients' residual) let a fast collapse go chaotic and throw particles out of the grid.
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
 /// nodes whatever the coefficients are; the divergence equalities are met to the tolerance on
 /// the steps that solve. A simulation takes [`VcSolve::automatic`] unless given a rule: 1e-4
-/// at order 1, every fourth step with RK shape functions to 128 cells across and every second
-/// with B-splines to 64, halved with every doubling of the grid beyond (the study's errors
+/// at order 1, every eighth step with RK shape functions and every second with B-splines to
+/// 256 cells across, halved with every doubling of the grid beyond (the study's errors
 /// within 1 % of a solve at every step, [`VcSolve::interval_for`]), and at order ≥ 2 a tolerance of
 /// 1e-4 that falls as `h^3` on grids finer than 32 cells across, at every step (a quarter to a
 /// half of the exact solve's iterations, errors within 1 %). [`VcSolve::EXACT`] names the exact solve
@@ -171,22 +172,23 @@ impl VcSolve {
     /// With RK shape functions at order 1 the automatic rule solves every this many steps on
     /// grids up to [`VcSolve::RK_CARRIED_CELLS`] cells across ([`VcSolve::interval_for`], which
     /// gives the errors measured); the steps between take the last solve's coefficients,
-    /// carried by node and extrapolated along the line through the last two solves. The fast
-    /// granular collapse's heap stays within 0.6 % of a solve at every step; linear and angular
-    /// momentum are conserved whatever the coefficients.
-    pub const RK_INTERVAL: u32 = 4;
+    /// carried by node and extrapolated along the line through the last two solves, and two
+    /// sweeps on their own system (`VC_CARRIED_SWEEPS`). Linear and angular momentum are
+    /// conserved whatever the coefficients.
+    pub const RK_INTERVAL: u32 = 8;
 
     /// The widest grid (cells across) on which RK's automatic interval is
     /// [`VcSolve::RK_INTERVAL`].
-    pub const RK_CARRIED_CELLS: usize = 128;
+    pub const RK_CARRIED_CELLS: usize = 256;
 
-    /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 3rd or 4th
-    /// step moved the errors on quarter points with slip walls by 1–2 % at 32 and 64 cells).
+    /// As [`VcSolve::RK_INTERVAL`], with the quadratic and cubic B-splines (every 4th step
+    /// moved the errors on quarter points with slip walls by 1.4–2.1 % at 128 cells, with the
+    /// sweeps between).
     pub const BSPLINE_INTERVAL: u32 = 2;
 
     /// The widest grid (cells across) on which the B-splines' automatic interval is
     /// [`VcSolve::BSPLINE_INTERVAL`].
-    pub const BSPLINE_CARRIED_CELLS: usize = 64;
+    pub const BSPLINE_CARRIED_CELLS: usize = 256;
 
     /// The exact solve: 1e-12 of the right-hand side's residual (`VC_SOLVE_EXACT_TOLERANCE`),
     /// at most 2000 iterations, at every step.
@@ -224,13 +226,15 @@ impl VcSolve {
     /// [`VcSolve::RK_CARRIED_CELLS`], with B-splines [`VcSolve::BSPLINE_INTERVAL`] up to
     /// [`VcSolve::BSPLINE_CARRIED_CELLS`], halved with every doubling of the grid beyond (at
     /// least 1); with linear hats 1. What the carried coefficients move grows with the grid's
-    /// width while the error they move falls: on the manufactured solution a fixed interval `k`
-    /// moved the error by about `k^2 N^2.4` on `N` cells (B-spline 2 + VC1 every 2nd step,
-    /// quarter points: 0.04, 0.5, 1.0 and 2.7 % at 32, 64, 96 and 128 cells; RK1 + VC1 on
-    /// jittered particles at 128 cells 0.5–0.8 % every 4th step, 2.4–3.6 % every 8th, at 256
-    /// cells 0.3–0.5 % every 2nd, 3.0 % every 4th), so no fixed interval holds the errors
-    /// within 1 % of a solve at every step on every grid (docs/convergence/FINDINGS.md,
-    /// "Carried coefficients on fine grids").
+    /// width while the error they move falls, so no fixed interval holds the errors within
+    /// 1 % of a solve at every step on every grid. Without sweeps between solves a fixed
+    /// interval `k` moved the manufactured solution's error by about `k^2 N^2.4` on `N` cells
+    /// (RK1 + VC1 on jittered particles every 8th step 2.4–3.6 % at 128 cells, every 4th 3.0 %
+    /// at 256); with the sweeps of `VC_CARRIED_SWEEPS` on grids wider than `VC_SWEPT_CELLS`
+    /// RK1 + VC1 every 8th step is within 0.3 % at 128 and 256 cells, B-spline 2 + VC1 every
+    /// 2nd on quarter points with slip walls within 0.3 % at 128 cells and 0.9 % at 256; to 64
+    /// cells, without sweeps, within 0.4 % and 0.6 % (docs/convergence/FINDINGS.md, "Sweeps
+    /// between solves").
     pub fn interval_for(shape: ShapeKind, cells_across: usize) -> u32 {
         let (mut interval, mut widest) = match shape {
             ShapeKind::Rk => (VcSolve::RK_INTERVAL, VcSolve::RK_CARRIED_CELLS),
@@ -266,6 +270,30 @@ impl VcSolve {
             ));
         }
         Ok(())
+    }
+}
+
+/// On a step between solves (`VcSolve::interval`) on a grid wider than [`VC_SWEPT_CELLS`]
+/// cells across, the carried coefficients take this many sweeps of the node blocks on the
+/// step's own system, `ζ ← ζ + A⁻¹ (rhs − K ζ)` with `K` applied matrix-free (a gather and a
+/// scatter over the particles' stencils): the particles have moved since the solve, and a sweep
+/// takes up the local part of what that moved, which the line through the last two solves does
+/// not. Measured on the manufactured solution (docs/convergence/FINDINGS.md, "Sweeps between
+/// solves").
+pub(crate) const VC_CARRIED_SWEEPS: usize = 2;
+
+/// The widest grid (cells across its widest axis) whose steps between solves take no sweeps:
+/// there the carried coefficients hold without them (RK1 + VC1 every 8th step within 0.4 % and
+/// B-spline 2 + VC1 every 2nd within 0.6 % of a solve at every step, to 64 cells), and a sweep
+/// costs what it saves (3D `bspline2` + VC1 on 35 cells: 1.13 of the step with two).
+pub(crate) const VC_SWEPT_CELLS: usize = 64;
+
+/// The sweeps a step between solves takes on `grid` ([`VC_CARRIED_SWEEPS`] on grids wider than
+/// [`VC_SWEPT_CELLS`]).
+fn sweeps<const D: usize>(grid: &Grid<D>) -> usize {
+    match grid.cells_across() > VC_SWEPT_CELLS {
+        true => VC_CARRIED_SWEEPS,
+        false => 0,
     }
 }
 
@@ -591,6 +619,9 @@ pub struct VcCorrection<const D: usize> {
     /// Whether the last solve took its bodies from the operator's lattice neighbours.
     #[cfg(test)]
     lattice_bodies: bool,
+    /// Steps between solves take no sweeps whatever the grid (`VC_CARRIED_SWEEPS`).
+    #[cfg(test)]
+    no_sweeps: bool,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -637,6 +668,8 @@ impl<const D: usize> VcCorrection<D> {
             undamped: false,
             #[cfg(test)]
             lattice_bodies: false,
+            #[cfg(test)]
+            no_sweeps: false,
         })
     }
 
@@ -682,6 +715,9 @@ impl<const D: usize> VcCorrection<D> {
             tensor,
         };
         self.body_of.clear();
+        // A step between solves (`VcSolve::interval`) takes no right-hand side, unless its
+        // carried coefficients take sweeps on its system (`VC_CARRIED_SWEEPS`).
+        let between_solves = self.between_solves(body.is_some()) && sweeps(grid) == 0;
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
@@ -693,13 +729,12 @@ impl<const D: usize> VcCorrection<D> {
                 });
             }
         };
-        // A step between solves (`VcSolve::interval`) takes no right-hand side.
-        let between_solves = self.between_solves(body.is_some());
         // The nodes: those of particle stencils (listed block by block), then those that only
         // boundary points reach. At order 1 the particle sums go with the marks, by node
         // (`node_sums`): A_I += V |Ψ_I|, rhs_Ik −= V ∂_k Ψ_I (Q = 1 and ∇Q = 0: neither a
-        // position nor the test function), only A_I between solves (the reach that bounds the
-        // carried coefficients); each node's sums in the particles' order, as by slot.
+        // position nor the test function), only A_I on a step between solves without sweeps
+        // (the reach that bounds the carried coefficients); each node's sums in the particles'
+        // order, as by slot.
         let per = 1 + D;
         if m == 1 {
             self.node_sums.resize(nodes.mass.len() * per, 0.0);
@@ -1124,11 +1159,103 @@ impl<const D: usize> VcCorrection<D> {
                 }
             });
         };
+        // K ζ: assembled, or the fits of ζ at the particles, then the node sums.
+        let product = |zeta: &[f64], out: &mut [f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
+            if let Some(operator) = &operator {
+                operator.apply(zeta, out);
+                return;
+            }
+            // The mean fit at order 1 is taken in the scatter's own pass, particle by particle
+            // (the same sums as `fits` in the same order), instead of kept.
+            let fused = m == 1 && !linear_fit && !matrix_free;
+            if !fused {
+                fits(zeta, fit);
+            }
+            out.par_chunks_exact_mut(m * D)
+                .zip(zeta.par_chunks_exact(m * D))
+                .enumerate()
+                .for_each(|(slot, (o, z))| {
+                    let a = &moment[slot * m * m..(slot + 1) * m * m];
+                    for k in 0..D {
+                        for i in 0..m {
+                            o[k * m + i] = (0..m).map(|j| a[i * m + j] * z[k * m + j]).sum::<f64>();
+                        }
+                    }
+                });
+            let shared = SharedSlice::new(out);
+            let fit = &*fit;
+            for colour in &bins.colours {
+                colour.par_iter().for_each(|&b| {
+                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
+                        let p = p as usize;
+                        if !counted(p) {
+                            continue;
+                        }
+                        let v = volumes[p];
+                        if fused {
+                            let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
+                            support.for_each_value(p, |n, w| {
+                                let w = w.abs();
+                                weight += w;
+                                let z = &zeta[nodes.slot(n) * D..];
+                                mu += w * Vector::<D>::from_fn(|k, _| z[k]);
+                            });
+                            if weight > 0.0 {
+                                mu /= weight;
+                            }
+                            support.for_each_value(p, |n, w| {
+                                let v = v * w.abs();
+                                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                                let o = unsafe { shared.range(nodes.slot(n) * D, D) };
+                                for k in 0..D {
+                                    o[k] -= v * mu[k];
+                                }
+                            });
+                            continue;
+                        }
+                        let (mu, slope) = &fit[p];
+                        if matrix_free {
+                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                            unsafe { supports.subtract_fit(p, v, mu, &shared) };
+                            continue;
+                        }
+                        // Order 1 (orders ≥ 2 without the assembled `K` take the supports).
+                        support.for_each(p, |s| {
+                            let v = v * s.value.abs();
+                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
+                            let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };
+                            let fitted = match linear_fit {
+                                true => mu + slope * frame_offset(p, s.node),
+                                false => *mu,
+                            };
+                            for k in 0..D {
+                                o[k] -= v * fitted[k];
+                            }
+                        });
+                    }
+                });
+            }
+        };
         // A step between solves takes the carried coefficients, bounded and fitted at the
         // particles as a solve's are.
         if reuse {
             let mut zeta = self.carried.at(&nodes.active, m * D);
             self.iterations = 0;
+            // Node-block sweeps on this step's system, matrix-free (`VC_CARRIED_SWEEPS`).
+            let sweeps = sweeps(grid);
+            #[cfg(test)]
+            let sweeps = if self.no_sweeps { 0 } else { sweeps };
+            let rhs = std::mem::take(&mut self.xi);
+            let (mut r, mut z) = (vec![0.0; len], vec![0.0; len]);
+            if !on_nodes && sweeps > 0 {
+                fit.resize(positions.len(), (Vector::zeros(), Matrix::zeros()));
+            }
+            for _ in 0..sweeps {
+                product(&zeta, &mut r, &mut fit);
+                r.par_iter_mut().zip(&rhs).for_each(|(r, b)| *r = b - *r);
+                node_blocks(&r, &mut z);
+                zeta.par_iter_mut().zip(&z).for_each(|(x, z)| *x += z);
+            }
             self.bound_first_order(&mut zeta, reach, h);
             match on_nodes {
                 true => self.lay_on_nodes(&zeta, nodes, &mut fit),
@@ -1188,57 +1315,6 @@ impl<const D: usize> VcCorrection<D> {
             }
             if project {
                 null.remove_from_coefficients(z);
-            }
-        };
-        // K ζ: assembled, or the fits of ζ at the particles, then the node sums.
-        let product = |zeta: &[f64], out: &mut [f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
-            if let Some(operator) = &operator {
-                operator.apply(zeta, out);
-                return;
-            }
-            fits(zeta, fit);
-            out.par_chunks_exact_mut(m * D)
-                .zip(zeta.par_chunks_exact(m * D))
-                .enumerate()
-                .for_each(|(slot, (o, z))| {
-                    let a = &moment[slot * m * m..(slot + 1) * m * m];
-                    for k in 0..D {
-                        for i in 0..m {
-                            o[k * m + i] = (0..m).map(|j| a[i * m + j] * z[k * m + j]).sum::<f64>();
-                        }
-                    }
-                });
-            let shared = SharedSlice::new(out);
-            let fit = &*fit;
-            for colour in &bins.colours {
-                colour.par_iter().for_each(|&b| {
-                    for &p in &bins.order[bins.occupied[b as usize].1.clone()] {
-                        let p = p as usize;
-                        if !counted(p) {
-                            continue;
-                        }
-                        let v = volumes[p];
-                        let (mu, slope) = &fit[p];
-                        if matrix_free {
-                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                            unsafe { supports.subtract_fit(p, v, mu, &shared) };
-                            continue;
-                        }
-                        // Order 1 (orders ≥ 2 without the assembled `K` take the supports).
-                        support.for_each(p, |s| {
-                            let v = v * s.value.abs();
-                            // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                            let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };
-                            let fitted = match linear_fit {
-                                true => mu + slope * frame_offset(p, s.node),
-                                false => *mu,
-                            };
-                            for k in 0..D {
-                                o[k] -= v * fitted[k];
-                            }
-                        });
-                    }
-                });
             }
         };
         // Off the null space (projected at order 1); at order ≥ 2, `(K + ε E A) ζ`
@@ -1440,6 +1516,10 @@ impl<const D: usize> VcCorrection<D> {
             self.body_of = body_of;
         }
     }
+
+    /// Scratch: sweeps between solves.
+    #[allow(dead_code)]
+    fn _unused() {}
 
     /// Whether this step takes the coefficients carried from the last solve instead of
     /// solving (`VcSolve::interval`): at order 1, for the one field (not `per_body` under
