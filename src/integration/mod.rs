@@ -1203,10 +1203,12 @@ impl<const D: usize> VcCorrection<D> {
                             if weight > 0.0 {
                                 mu /= weight;
                             }
-                            support.for_each_value(p, |n, w| {
-                                let v = v * w.abs();
+                            // The nodes in the support with the shape function's own values,
+                            // as the scatter of kept fits below takes them.
+                            support.for_each(p, |s| {
+                                let v = v * s.value.abs();
                                 // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                                let o = unsafe { shared.range(nodes.slot(n) * D, D) };
+                                let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };
                                 for k in 0..D {
                                     o[k] -= v * mu[k];
                                 }
