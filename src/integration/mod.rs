@@ -1192,30 +1192,24 @@ impl<const D: usize> VcCorrection<D> {
                             continue;
                         }
                         let v = volumes[p];
-                        if fused {
-                            let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
-                            support.for_each_value(p, |n, w| {
-                                let w = w.abs();
-                                weight += w;
-                                let z = &zeta[nodes.slot(n) * D..];
-                                mu += w * Vector::<D>::from_fn(|k, _| z[k]);
-                            });
-                            if weight > 0.0 {
-                                mu /= weight;
-                            }
-                            // The nodes in the support with the shape function's own values,
-                            // as the scatter of kept fits below takes them.
-                            support.for_each(p, |s| {
-                                let v = v * s.value.abs();
-                                // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
-                                let o = unsafe { shared.range(nodes.slot(s.node) * D, D) };
-                                for k in 0..D {
-                                    o[k] -= v * mu[k];
+                        let (mu, slope) = match fused {
+                            // As `fits` takes the mean.
+                            true => {
+                                let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
+                                support.for_each_value(p, |n, w| {
+                                    let w = w.abs();
+                                    weight += w;
+                                    let z = &zeta[nodes.slot(n) * D..];
+                                    mu += w * Vector::<D>::from_fn(|k, _| z[k]);
+                                });
+                                if weight > 0.0 {
+                                    mu /= weight;
                                 }
-                            });
-                            continue;
-                        }
-                        let (mu, slope) = &fit[p];
+                                (mu, Matrix::<D>::zeros())
+                            }
+                            false => fit[p],
+                        };
+                        let (mu, slope) = (&mu, &slope);
                         if matrix_free {
                             // SAFETY: blocks of one colour write disjoint nodes (`Bins`).
                             unsafe { supports.subtract_fit(p, v, mu, &shared) };
@@ -1247,16 +1241,16 @@ impl<const D: usize> VcCorrection<D> {
             let sweeps = sweeps(grid);
             #[cfg(test)]
             let sweeps = if self.no_sweeps { 0 } else { sweeps };
-            let rhs = std::mem::take(&mut self.xi);
-            let (mut r, mut z) = (vec![0.0; len], vec![0.0; len]);
-            if !on_nodes && sweeps > 0 {
-                fit.resize(positions.len(), (Vector::zeros(), Matrix::zeros()));
-            }
-            for _ in 0..sweeps {
-                product(&zeta, &mut r, &mut fit);
-                r.par_iter_mut().zip(&rhs).for_each(|(r, b)| *r = b - *r);
-                node_blocks(&r, &mut z);
-                zeta.par_iter_mut().zip(&z).for_each(|(x, z)| *x += z);
+            if sweeps > 0 {
+                // The fits' room is there where the product takes kept fits (not `on_nodes`).
+                let rhs = std::mem::take(&mut self.xi);
+                let (mut r, mut z) = (vec![0.0; len], vec![0.0; len]);
+                for _ in 0..sweeps {
+                    product(&zeta, &mut r, &mut fit);
+                    r.par_iter_mut().zip(&rhs).for_each(|(r, b)| *r = b - *r);
+                    node_blocks(&r, &mut z);
+                    zeta.par_iter_mut().zip(&z).for_each(|(x, z)| *x += z);
+                }
             }
             self.bound_first_order(&mut zeta, reach, h);
             match on_nodes {
