@@ -932,7 +932,8 @@ enum RkmpmStatus rkmpm_sim_set_vc_solve(struct RkmpmSim *sim,
  * node (the next solve starts from them); 1 solves at every step. Order 1 only, without
  * contact: VC of order >= 2 and the bodies' corrections under contact solve at every step.
  * Between solves the coefficients go on along the line through the last two solves and, on
- * grids wider than 64 cells across, take two sweeps on the step's own system. Without
+ * grids wider than 64 cells across, take sweeps on the step's own system (two with B-splines,
+ * one with RK shape functions). Without
  * it a simulation solves at every step (`RKMPM_DEFAULT_VC_SOLVE_INTERVAL`), but at order 1
  * every `RKMPM_BSPLINE_VC_SOLVE_INTERVAL` (2) steps with B-splines and
  * `RKMPM_RK_VC_SOLVE_INTERVAL` (8) with RK shape functions on grids up to

@@ -130,8 +130,8 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// The rule of VC's conservative solve: conjugate gradients stop when the preconditioned
 /// residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`; the solve runs every `interval` steps, and the steps between take the
-/// coefficients of the last solve, carried by grid node, after two sweeps of the node blocks
-/// on their own system (`VC_CARRIED_SWEEPS`). At order 1 the next solve starts from
+/// coefficients of the last solve, carried by grid node, after sweeps of the node blocks on
+/// their own system (two with B-splines, one with RK: `carried_sweeps_for`). At order 1 the next solve starts from
 /// them and runs to the tolerance too: a solve stopped short of it (at a tenth of the carried
 /// coefficients' residual) let a fast collapse go chaotic and throw particles out of the grid.
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
@@ -172,8 +172,8 @@ impl VcSolve {
     /// With RK shape functions at order 1 the automatic rule solves every this many steps on
     /// grids up to [`VcSolve::RK_CARRIED_CELLS`] cells across ([`VcSolve::interval_for`], which
     /// gives the errors measured); the steps between take the last solve's coefficients,
-    /// carried by node and extrapolated along the line through the last two solves, and two
-    /// sweeps on their own system (`VC_CARRIED_SWEEPS`). Linear and angular momentum are
+    /// carried by node and extrapolated along the line through the last two solves, and one
+    /// sweep on their own system (`VC_RK_CARRIED_SWEEPS`). Linear and angular momentum are
     /// conserved whatever the coefficients.
     pub const RK_INTERVAL: u32 = 8;
 
@@ -275,12 +275,27 @@ impl VcSolve {
 
 /// On a step between solves (`VcSolve::interval`) on a grid wider than [`VC_SWEPT_CELLS`]
 /// cells across, the carried coefficients take this many sweeps of the node blocks on the
-/// step's own system, `ζ ← ζ + A⁻¹ (rhs − K ζ)` with `K` applied matrix-free (a gather and a
-/// scatter over the particles' stencils): the particles have moved since the solve, and a sweep
-/// takes up the local part of what that moved, which the line through the last two solves does
-/// not. Measured on the manufactured solution (docs/convergence/FINDINGS.md, "Sweeps between
-/// solves").
+/// step's own system with B-splines, `ζ ← ζ + A⁻¹ (rhs − K ζ)` with `K` applied matrix-free (a
+/// gather and a scatter over the particles' stencils): the particles have moved since the
+/// solve, and a sweep takes up the local part of what that moved, which the line through the
+/// last two solves does not. Measured on the manufactured solution
+/// (docs/convergence/FINDINGS.md, "Sweeps between solves"): with B-splines every 2nd step one
+/// sweep moved the error by 2.8 % at 256 cells, two by 0.9 %.
 pub(crate) const VC_CARRIED_SWEEPS: usize = 2;
+
+/// As [`VC_CARRIED_SWEEPS`], with RK shape functions: one sweep holds their interval (every
+/// 8th step within 0.7 % at 256 cells, 0.3 % at 128), and on their stored stencils a sweep
+/// costs three times what it does on the B-splines' factors.
+pub(crate) const VC_RK_CARRIED_SWEEPS: usize = 1;
+
+/// The sweeps a step between solves takes with shape functions of kind `shape`, on grids wider
+/// than [`VC_SWEPT_CELLS`].
+pub(crate) fn carried_sweeps_for(shape: ShapeKind) -> usize {
+    match shape {
+        ShapeKind::Rk => VC_RK_CARRIED_SWEEPS,
+        _ => VC_CARRIED_SWEEPS,
+    }
+}
 
 /// The widest grid (cells across its widest axis) whose steps between solves take no sweeps:
 /// there the carried coefficients hold without them (RK1 + VC1 every 8th step within 0.4 % and
@@ -288,11 +303,11 @@ pub(crate) const VC_CARRIED_SWEEPS: usize = 2;
 /// costs what it saves (3D `bspline2` + VC1 on 35 cells: 1.13 of the step with two).
 pub(crate) const VC_SWEPT_CELLS: usize = 64;
 
-/// The sweeps a step between solves takes on `grid` ([`VC_CARRIED_SWEEPS`] on grids wider than
-/// [`VC_SWEPT_CELLS`]).
-fn sweeps<const D: usize>(grid: &Grid<D>) -> usize {
+/// The sweeps a step between solves takes on `grid`: `per_step` ([`carried_sweeps_for`]) on
+/// grids wider than [`VC_SWEPT_CELLS`], none on others.
+fn sweeps<const D: usize>(grid: &Grid<D>, per_step: usize) -> usize {
     match grid.cells_across() > VC_SWEPT_CELLS {
-        true => VC_CARRIED_SWEEPS,
+        true => per_step,
         false => 0,
     }
 }
@@ -619,9 +634,9 @@ pub struct VcCorrection<const D: usize> {
     /// Whether the last solve took its bodies from the operator's lattice neighbours.
     #[cfg(test)]
     lattice_bodies: bool,
-    /// Steps between solves take no sweeps whatever the grid (`VC_CARRIED_SWEEPS`).
-    #[cfg(test)]
-    no_sweeps: bool,
+    /// The sweeps a step between solves takes on a grid wider than `VC_SWEPT_CELLS`
+    /// ([`carried_sweeps_for`] the simulation's shape functions).
+    pub(crate) carried_sweeps: usize,
 }
 
 impl<const D: usize> VcCorrection<D> {
@@ -668,8 +683,7 @@ impl<const D: usize> VcCorrection<D> {
             undamped: false,
             #[cfg(test)]
             lattice_bodies: false,
-            #[cfg(test)]
-            no_sweeps: false,
+            carried_sweeps: VC_CARRIED_SWEEPS,
         })
     }
 
@@ -717,7 +731,8 @@ impl<const D: usize> VcCorrection<D> {
         self.body_of.clear();
         // A step between solves (`VcSolve::interval`) takes no right-hand side, unless its
         // carried coefficients take sweeps on its system (`VC_CARRIED_SWEEPS`).
-        let between_solves = self.between_solves(body.is_some()) && sweeps(grid) == 0;
+        let between_solves =
+            self.between_solves(body.is_some()) && sweeps(grid, self.carried_sweeps) == 0;
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
             for colour in &bins.colours {
                 colour.par_iter().for_each(|&b| {
@@ -1108,6 +1123,21 @@ impl<const D: usize> VcCorrection<D> {
                 (Vector::<D>::zeros(), Matrix::<D>::zeros()),
             );
         }
+        // The mean fit at order 1: the weighted mean of the coefficients (nodes of zero value
+        // weigh nothing).
+        let mean_fit = |p: usize, zeta: &[f64]| {
+            let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
+            support.for_each_value(p, |n, w| {
+                let w = w.abs();
+                weight += w;
+                let z = &zeta[nodes.slot(n) * D..];
+                mu += w * Vector::<D>::from_fn(|k, _| z[k]);
+            });
+            if weight > 0.0 {
+                mu /= weight;
+            }
+            mu
+        };
         // The fits of ζ at the particles: the weighted mean `μ_p` of `ζ_J·Q_J(x_p)` and, at
         // order 1, the slope `C_p = Σ_J w_Jp ζ_J ⊗ u_Jp` of the weighted linear fit.
         let fits = |zeta: &[f64], fit: &mut [(Vector<D>, Matrix<D>)]| {
@@ -1123,18 +1153,8 @@ impl<const D: usize> VcCorrection<D> {
                     *mu = supports.fit(p, zeta);
                     return;
                 }
-                // The mean fit: the weighted mean of the coefficients (nodes of zero value
-                // weigh nothing).
                 if m == 1 && !linear_fit {
-                    support.for_each_value(p, |n, w| {
-                        let w = w.abs();
-                        weight += w;
-                        let z = &zeta[nodes.slot(n) * D..];
-                        *mu += w * Vector::<D>::from_fn(|k, _| z[k]);
-                    });
-                    if weight > 0.0 {
-                        *mu /= weight;
-                    }
+                    *mu = mean_fit(p, zeta);
                     return;
                 }
                 support.for_each(p, |s| {
@@ -1193,20 +1213,7 @@ impl<const D: usize> VcCorrection<D> {
                         }
                         let v = volumes[p];
                         let (mu, slope) = match fused {
-                            // As `fits` takes the mean.
-                            true => {
-                                let (mut mu, mut weight) = (Vector::<D>::zeros(), 0.0);
-                                support.for_each_value(p, |n, w| {
-                                    let w = w.abs();
-                                    weight += w;
-                                    let z = &zeta[nodes.slot(n) * D..];
-                                    mu += w * Vector::<D>::from_fn(|k, _| z[k]);
-                                });
-                                if weight > 0.0 {
-                                    mu /= weight;
-                                }
-                                (mu, Matrix::<D>::zeros())
-                            }
+                            true => (mean_fit(p, zeta), Matrix::<D>::zeros()),
                             false => fit[p],
                         };
                         let (mu, slope) = (&mu, &slope);
@@ -1238,9 +1245,7 @@ impl<const D: usize> VcCorrection<D> {
             let mut zeta = self.carried.at(&nodes.active, m * D);
             self.iterations = 0;
             // Node-block sweeps on this step's system, matrix-free (`VC_CARRIED_SWEEPS`).
-            let sweeps = sweeps(grid);
-            #[cfg(test)]
-            let sweeps = if self.no_sweeps { 0 } else { sweeps };
+            let sweeps = sweeps(grid, self.carried_sweeps);
             if sweeps > 0 {
                 // The fits' room is there where the product takes kept fits (not `on_nodes`).
                 let rhs = std::mem::take(&mut self.xi);
@@ -1512,10 +1517,6 @@ impl<const D: usize> VcCorrection<D> {
             self.body_of = body_of;
         }
     }
-
-    /// Scratch: sweeps between solves.
-    #[allow(dead_code)]
-    fn _unused() {}
 
     /// Whether this step takes the coefficients carried from the last solve instead of
     /// solving (`VcSolve::interval`): at order 1, for the one field (not `per_body` under

@@ -255,7 +255,9 @@ fn sweeps_between_solves_take_up_what_the_particles_moved() {
             interval: 8,
             ..VcSolve::EXACT
         };
-        vc.no_sweeps = no_sweeps;
+        if no_sweeps {
+            vc.carried_sweeps = 0;
+        }
         fn inputs<'a>(
             sim: &'a Sim<2>,
             ps: &'a crate::particles::Particles<2>,
@@ -763,6 +765,29 @@ fn the_automatic_rule_tightens_as_h_cubed_at_order_two() {
         VcSolve::automatic(2, 64, ShapeKind::Rk).max_iterations,
         VcSolve::DEFAULT.max_iterations
     );
+}
+
+/// A simulation hands its correction the sweeps of its shape functions between solves (two
+/// with B-splines, one with RK: `carried_sweeps_for`), whichever of the shape and the
+/// integration is set first, and keeps them through a change of the solve's rule.
+#[test]
+fn steps_between_solves_take_the_sweeps_of_the_shape_functions() {
+    let rk = Shape::Rk {
+        order: 1,
+        support: 2.0,
+    };
+    let sweeps = |sim: &Sim<2>| sim.vc.as_ref().unwrap().carried_sweeps;
+    let mut sim = jittered_box_on::<2>(4, rk, Some(1), 0.0);
+    assert_eq!(sweeps(&sim), VC_RK_CARRIED_SWEEPS);
+    sim.set_shape(Shape::BSpline2).unwrap();
+    assert_eq!(sweeps(&sim), VC_CARRIED_SWEEPS);
+    let mut sim = jittered_box_on::<2>(4, Shape::BSpline3, None, 0.0);
+    sim.set_integration(Integration::Vc { order: 1 }).unwrap();
+    assert_eq!(sweeps(&sim), VC_CARRIED_SWEEPS);
+    sim.set_shape(rk).unwrap();
+    sim.set_vc1_every(8);
+    assert_eq!(sweeps(&sim), VC_RK_CARRIED_SWEEPS);
+    assert_eq!((VC_CARRIED_SWEEPS, VC_RK_CARRIED_SWEEPS), (2, 1));
 }
 
 /// The bodies from the cells the stencil boxes cover (`box_bodies`) are those from every

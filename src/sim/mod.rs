@@ -12,7 +12,7 @@ pub const DEFAULT_VC_SURFACE_REFRESH: u32 = 4;
 use crate::energy::EnergyLedger;
 use crate::error::{check_finite, check_positive, Error, ErrorKind, Result};
 use crate::grid::Grid;
-use crate::integration::{BoundaryPoints, VcCorrection};
+use crate::integration::{carried_sweeps_for, BoundaryPoints, VcCorrection};
 use crate::material::{Constitutive, Material};
 use crate::options::{FastPaths, Shape, Side, Wall};
 pub use crate::options::{Integration, Options, Scheme, Transfer};
@@ -366,6 +366,7 @@ impl<const D: usize> Sim<D> {
                 let mut vc = VcCorrection::new(order)?;
                 vc.linear_fit = self.vc_linear_fit && self.options.shape.vc_linear_fit();
                 vc.solve = self.vc_solve_of(order);
+                vc.carried_sweeps = carried_sweeps_for(self.options.shape.kind());
                 Some(vc)
             }
         };
@@ -432,8 +433,10 @@ impl<const D: usize> Sim<D> {
     /// Hands the rule in force to the correction.
     fn apply_vc_solve(&mut self) {
         let solve = self.vc_solve();
+        let sweeps = carried_sweeps_for(self.options.shape.kind());
         if let Some(vc) = &mut self.vc {
             vc.solve = solve;
+            vc.carried_sweeps = sweeps;
         }
     }
 
