@@ -131,9 +131,10 @@ pub const VC_SOLVE_REFERENCE_CELLS: usize = 32;
 /// residual norm has fallen to `tolerance` of the right-hand side's, or after
 /// `max_iterations`; the solve runs every `interval` steps, and the steps between take the
 /// coefficients of the last solve, carried by grid node, after sweeps of the node blocks on
-/// their own system (two with B-splines, one with RK: `carried_sweeps_for`). At order 1 the next solve starts from
-/// them and runs to the tolerance too: a solve stopped short of it (at a tenth of the carried
-/// coefficients' residual) let a fast collapse go chaotic and throw particles out of the grid.
+/// their own system (two with B-splines, one with RK: `carried_sweeps_for`). At order 1 the
+/// next solve starts from them and runs to the tolerance too: a solve stopped short of it (at
+/// a tenth of the carried coefficients' residual) let a fast collapse go chaotic and throw
+/// particles out of the grid.
 /// Conservation does not depend on it: the corrected gradients sum to zero over a particle's
 /// nodes whatever the coefficients are; the divergence equalities are met to the tolerance on
 /// the steps that solve. A simulation takes [`VcSolve::automatic`] unless given a rule: 1e-4
@@ -730,7 +731,7 @@ impl<const D: usize> VcCorrection<D> {
         };
         self.body_of.clear();
         // A step between solves (`VcSolve::interval`) takes no right-hand side, unless its
-        // carried coefficients take sweeps on its system (`VC_CARRIED_SWEEPS`).
+        // carried coefficients take sweeps on its system (`carried_sweeps`).
         let between_solves =
             self.between_solves(body.is_some()) && sweeps(grid, self.carried_sweeps) == 0;
         let by_colour = |visit: &(dyn Fn(usize) + Sync)| {
@@ -1244,7 +1245,7 @@ impl<const D: usize> VcCorrection<D> {
         if reuse {
             let mut zeta = self.carried.at(&nodes.active, m * D);
             self.iterations = 0;
-            // Node-block sweeps on this step's system, matrix-free (`VC_CARRIED_SWEEPS`).
+            // Node-block sweeps on this step's system, matrix-free (`carried_sweeps`).
             let sweeps = sweeps(grid, self.carried_sweeps);
             if sweeps > 0 {
                 // The fits' room is there where the product takes kept fits (not `on_nodes`).
