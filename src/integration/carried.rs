@@ -1,6 +1,6 @@
 //! VC's coefficients carried by grid node from one solve to the steps that follow it, which
 //! take them instead of solving ([`super::VcSolve::interval`]; on wide grids after sweeps on
-//! their own system, `super::VC_CARRIED_SWEEPS`), and to the next solve, which
+//! their own system, `super::carried_sweeps_for`), and to the next solve, which
 //! starts from them. With the solve before it kept too, the carried values go on along the line
 //! through both (extrapolated linearly in time): the particles move, and the coefficients that
 //! the solve would give move with them, which a value held constant lags.

@@ -365,12 +365,11 @@ impl<const D: usize> Sim<D> {
             Integration::Vc { order } => {
                 let mut vc = VcCorrection::new(order)?;
                 vc.linear_fit = self.vc_linear_fit && self.options.shape.vc_linear_fit();
-                vc.solve = self.vc_solve_of(order);
-                vc.carried_sweeps = carried_sweeps_for(self.options.shape.kind());
                 Some(vc)
             }
         };
         self.options.integration = integration;
+        self.apply_vc_solve();
         Ok(())
     }
 
@@ -430,7 +429,8 @@ impl<const D: usize> Sim<D> {
         self.apply_vc_solve();
     }
 
-    /// Hands the rule in force to the correction.
+    /// Hands the rule in force, and the sweeps between solves of the shape functions, to the
+    /// correction.
     fn apply_vc_solve(&mut self) {
         let solve = self.vc_solve();
         let sweeps = carried_sweeps_for(self.options.shape.kind());
@@ -444,18 +444,14 @@ impl<const D: usize> Sim<D> {
     /// automatic rule for the simulation's VC order (order 1 without VC) and grid.
     pub fn vc_solve(&self) -> crate::VcSolve {
         let order = self.vc.as_ref().map_or(1, |vc| vc.order);
-        self.vc_solve_of(order)
+        let shape = self.options.shape.kind();
+        self.vc_solve
+            .unwrap_or_else(|| crate::VcSolve::automatic(order, self.grid.cells_across(), shape))
     }
 
     /// Whether the solve follows the automatic rule (no rule given, [`Sim::set_vc_solve`]).
     pub fn vc_solve_is_automatic(&self) -> bool {
         self.vc_solve.is_none()
-    }
-
-    fn vc_solve_of(&self, order: u32) -> crate::VcSolve {
-        let shape = self.options.shape.kind();
-        self.vc_solve
-            .unwrap_or_else(|| crate::VcSolve::automatic(order, self.grid.cells_across(), shape))
     }
 
     /// Chooses the velocity transfer. Before stepping only.
