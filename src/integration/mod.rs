@@ -231,7 +231,7 @@ impl VcSolve {
     /// 1 % of a solve at every step on every grid. Without sweeps between solves a fixed
     /// interval `k` moved the manufactured solution's error by about `k^2 N^2.4` on `N` cells
     /// (RK1 + VC1 on jittered particles every 8th step 2.4–3.6 % at 128 cells, every 4th 3.0 %
-    /// at 256); with the sweeps of [`carried_sweeps_for`] on grids wider than `VC_SWEPT_CELLS`
+    /// at 256); with the sweeps of `carried_sweeps_for` on grids wider than `VC_SWEPT_CELLS`
     /// RK1 + VC1 every 8th step is within 0.7 % at 128 and 256 cells, B-spline 2 + VC1 every
     /// 2nd on quarter points with slip walls within 0.3 % at 128 cells and 0.9 % at 256; to 64
     /// cells, without sweeps, within 0.4 % and 0.6 % (docs/convergence/FINDINGS.md, "Sweeps
