@@ -1272,8 +1272,10 @@ impl<const D: usize> VcCorrection<D> {
                 }
             });
         };
+        // Order 1 with the mean fit, not assembled: `K ζ` by grid node (`mean_fit_product`).
+        let by_node_product = m == 1 && !linear_fit && !matrix_free && operator.is_none();
         let mut by_node_room = std::mem::take(&mut self.by_node);
-        if m == 1 && !linear_fit && !matrix_free && operator.is_none() {
+        if by_node_product {
             by_node_room.resize(2 * nodes.mass.len(), Vector::<D>::zeros());
         }
         let by_node = SharedSlice::new(&mut by_node_room[..]);
@@ -1293,7 +1295,7 @@ impl<const D: usize> VcCorrection<D> {
             }
             // The mean fit at order 1 is taken in the scatter's own pass, particle by particle
             // (the same sums as `fits` in the same order), instead of kept.
-            if m == 1 && !linear_fit && !matrix_free {
+            if by_node_product {
                 return mean_fit_product(&mean_fit_inputs, zeta, out, &by_node);
             }
             fits(zeta, fit);
